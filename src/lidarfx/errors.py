@@ -1,0 +1,8 @@
+"""Errors a user can act on.  The CLI prints them as one line and exits with code 2."""
+
+
+class LidarfxError(Exception):
+    """Bad input or an impossible request: shown to the user as a one-line message."""
+
+
+EXIT_USAGE = 2

@@ -1,0 +1,13 @@
+"""Per-point neighbourhood features (SPEC §2–3).
+
+>>> import lidarfx
+>>> cloud = lidarfx.read("scan.laz")                                  # doctest: +SKIP
+>>> out = lidarfx.compute_features(cloud, ["eigen", "slope"], radius=0.5)  # doctest: +SKIP
+>>> out["planarity"]                                                  # doctest: +SKIP
+"""
+from __future__ import annotations
+
+from .api import compute_features, feature_arrays
+from .registry import DEFAULT_FEATURES, available, resolve
+
+__all__ = ["compute_features", "feature_arrays", "available", "resolve", "DEFAULT_FEATURES"]

@@ -1,0 +1,288 @@
+"""``compute_features``: the public entry point of the feature engine."""
+from __future__ import annotations
+
+import math
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+from ..neighbors import NeighborIndex, default_cell_for_knn, ring_buffer_size
+from ..progress import bar, wanted
+from . import slots as S
+from .eigen import CONVENTIONS
+from .engine import KIND_CYLINDER, KIND_SPHERE, point_features
+from .msac import msac_features
+from .registry import Request, resolve
+
+NEIGHBOURHOODS = ("sphere", "cylinder", "knn")
+_BLOCK = 262_144  # queries per kernel call (progress granularity)
+
+
+def scale_suffix(radius: float) -> str:
+    """Attribute-name suffix of one scale in a multi-scale run: ``_r0.50``."""
+    return f"_r{radius:.2f}"
+
+
+def _radii(radius, radii) -> list[float]:
+    if radii is None and radius is None:
+        return []
+    vals: list[float] = []
+    for r in ([radius] if radius is not None else []) + list(radii or []):
+        vals += list(np.atleast_1d(np.asarray(r, dtype=float)))
+    out = sorted(set(float(r) for r in vals))
+    if any(not (r > 0 and math.isfinite(r)) for r in out):
+        raise LidarfxError(f"radii must be positive numbers, got {out}")
+    return out
+
+
+def _query_index(query, n: int) -> np.ndarray | None:
+    if query is None:
+        return None
+    q = np.asarray(query)
+    if q.dtype == bool:
+        if q.shape != (n,):
+            raise LidarfxError(f"query mask must have length {n}, got {q.shape}")
+        return np.flatnonzero(q)
+    q = q.astype(np.int64, copy=False).ravel()
+    if q.size and (q.min() < 0 or q.max() >= n):
+        raise LidarfxError("query indices out of range")
+    return q
+
+
+def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:
+    """Processing order of query points: by grid column, so neighbours stay in cache."""
+    ix = np.floor(q[:, 0] / cell).astype(np.int64)
+    iy = np.floor(q[:, 1] / cell).astype(np.int64)
+    key = (ix - ix.min(initial=0)) * (int(iy.max(initial=0) - iy.min(initial=0)) + 1) + (iy - iy.min(initial=0))
+    return np.argsort(key, kind="stable")
+
+
+def feature_arrays(
+    xyz: np.ndarray,
+    features: str | Iterable[str] | None = None,
+    *,
+    radius: float | None = None,
+    radii: Sequence[float] | None = None,
+    neighbourhood: str = "sphere",
+    k: int | None = None,
+    query_xyz: np.ndarray | None = None,
+    query_ids: np.ndarray | None = None,
+    scanner: Sequence[float] | None = None,
+    height: float | None = None,
+    convention: str = "default",
+    d_max: float = 0.10,
+    hist_bins: int = 10,
+    msac_threshold: float | None = None,
+    msac_iterations: int = 100,
+    seed: int = 0,
+    progress: bool | None = None,
+    index: NeighborIndex | None = None,
+) -> dict[str, np.ndarray]:
+    """Neighbourhood features as a dict ``name -> float32 array`` (the array-level API).
+
+    ``xyz`` is the neighbour cloud; features are computed at ``query_xyz``
+    (default: every point of ``xyz``).  See :func:`compute_features` for the
+    parameters.  Per-point features (``return_ratio``) are not handled here.
+    """
+    req = features if isinstance(features, Request) else resolve(features)
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if neighbourhood not in NEIGHBOURHOODS:
+        raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
+    if convention not in CONVENTIONS:
+        raise LidarfxError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+    if not req.slots:
+        return {}
+    rs = _radii(radius, radii)
+    if neighbourhood == "knn":
+        if not k or k < 1:
+            raise LidarfxError("neighbourhood 'knn' needs k >= 1 (e.g. k=20)")
+        if len(rs) > 1:
+            raise LidarfxError("kNN takes at most one radius (the cap)")
+    elif not rs:
+        raise LidarfxError("give a radius (e.g. radius=0.5) or several radii")
+    if hist_bins < 2:
+        raise LidarfxError("hist_bins must be >= 2")
+    if height is not None and not height > 0:
+        raise LidarfxError("cylinder height limit must be > 0")
+    if len(xyz) == 0:
+        raise LidarfxError("the point cloud is empty")
+
+    if index is None:
+        cell = default_cell_for_knn(xyz - xyz.min(0), k) if neighbourhood == "knn" else rs[-1]
+        index = NeighborIndex(xyz, cell)
+    g = index.grid
+    q = index.to_local(xyz if query_xyz is None else query_xyz)
+    m = len(q)
+    qorder = _grid_order(q, g.cell) if query_xyz is not None else index.order
+    qid = np.arange(m, dtype=np.int64) if query_ids is None else np.asarray(query_ids, dtype=np.int64)
+
+    if neighbourhood == "knn":
+        _, kd = index.knn(q + index.origin, int(k), max_radius=rs[0] if rs else None)
+        rk = np.where(np.isfinite(kd), kd, -np.inf).max(axis=1)
+        if rs:
+            rk = np.where(np.isfinite(kd[:, -1]), rk, rs[0])
+        rk = np.maximum(rk, 0.0)
+        rad = (rk * (1.0 + 1e-9) + 1e-12).reshape(-1, 1)
+        names_for_scale = [""]
+    else:
+        rad = np.asarray(rs, dtype=np.float64).reshape(1, -1)
+        names_for_scale = [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
+    nscale = rad.shape[1]
+    kind = KIND_CYLINDER if neighbourhood == "cylinder" else KIND_SPHERE
+
+    col = np.full(S.NSLOTS, -1, np.int64)
+    for c, s in enumerate(req.slots):
+        col[s] = c
+    out = np.full((nscale, len(req.slots), m), np.nan, dtype=np.float32)
+    sc = np.zeros(3) if scanner is None else np.asarray(scanner, dtype=np.float64) - index.origin
+    if sc.shape != (3,):
+        raise LidarfxError("scanner position must be x,y,z")
+    hz = np.inf if height is None else float(height)
+    nbuf = ring_buffer_size(float(rad.max()), g.cell)
+    conv = CONVENTIONS[convention]
+    show = wanted(progress, m * nscale, threshold=2_000_000)
+    with bar("features", m, show) as advance:
+        for a in range(0, m, _BLOCK):
+            blk = qorder[a : a + _BLOCK]
+            if req.need_engine:
+                point_features(
+                    *g, q, blk, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
+                    int(hist_bins), req.need_cylinder, req.need_pass2, nbuf, out,
+                )
+            if req.need_msac:
+                thr = float(d_max if msac_threshold is None else msac_threshold)
+                for s in range(nscale):
+                    msac_features(
+                        *g, q, blk, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
+                        10, int(msac_iterations), int(seed), nbuf, out,
+                    )
+            advance(len(blk))
+    result: dict[str, np.ndarray] = {}
+    for s, suffix in enumerate(names_for_scale):
+        for c, slot in enumerate(req.slots):
+            result[S.NAMES[slot] + suffix] = out[s, c]
+    return result
+
+
+def compute_features(
+    cloud: PointCloud,
+    features: str | Iterable[str] | None = None,
+    *,
+    radius: float | None = None,
+    radii: Sequence[float] | None = None,
+    neighbourhood: str = "sphere",
+    k: int | None = None,
+    query=None,
+    scanner: Sequence[float] | None = None,
+    height: float | None = None,
+    convention: str = "default",
+    d_max: float = 0.10,
+    hist_bins: int = 10,
+    msac_threshold: float | None = None,
+    msac_iterations: int = 100,
+    seed: int = 0,
+    progress: bool | None = None,
+    inplace: bool = False,
+) -> PointCloud:
+    """Compute per-point features and return a cloud carrying them as attributes.
+
+    Parameters
+    ----------
+    cloud:
+        The neighbour cloud.
+    features:
+        Group names (``eigen, westin, plane, msac, density, height, histogram,
+        distribution, curvature, eigenvectors, count, echo``), single feature
+        names (``slope``), ``all``, or a comma-separated string of them.
+        Default: ``eigen, plane, density``.
+    radius, radii:
+        One radius, or several (multi-scale: names get the suffix ``_r0.50``).
+        With ``neighbourhood="knn"`` an optional radius caps the kNN search.
+    neighbourhood:
+        ``sphere`` (3-D), ``cylinder`` (vertical, 2-D distance) or ``knn``.
+        It decides the neighbours of the covariance features (eigen, westin,
+        plane, msac, distribution, curvature); density always compares the
+        sphere with the cylinder, height and histogram features always use the
+        cylinder.
+    k:
+        Number of neighbours for ``knn`` (the query point counts as one).
+    query:
+        Boolean mask or indices of the points to compute features for; all
+        points of ``cloud`` still serve as neighbours.  The result then holds
+        only the query points.
+    scanner:
+        Scanner position (x, y, z) for TLS: normals are oriented towards it
+        instead of up.
+    height:
+        Half-height limit of the vertical cylinder (default: unbounded).
+    convention:
+        ``default`` (SPEC table), ``cloudcompare`` (raw eigenvalues in
+        omnivariance / eigenentropy, as CloudCompare and jakteristics) or
+        ``pdal`` (square roots of the eigenvalues, as PDAL and pgeof).
+    d_max:
+        Distance to the local plane that counts as inlier (m), also the MSAC
+        threshold unless ``msac_threshold`` is given.
+    hist_bins:
+        Bins of Lang's height-difference histogram.
+    msac_iterations, seed:
+        Upper bound of MSAC trials and the seed of its generator.
+    progress:
+        Show a progress bar (default: on a terminal for large clouds).
+    inplace:
+        Add the features to ``cloud`` itself instead of a new cloud (ignored
+        with ``query``).
+
+    Returns
+    -------
+    PointCloud
+        Features as float32 attributes; NaN where not computable (fewer than 3
+        neighbours for covariance features, 6 for curvature, flat ground for
+        aspect, ...).  ``result.meta["features"]`` lists the names written.
+    """
+    if not isinstance(cloud, PointCloud):
+        raise LidarfxError("compute_features expects a PointCloud (see lidarfx.read)")
+    req = resolve(features)
+    qi = _query_index(query, len(cloud))
+    arrays = feature_arrays(
+        cloud.xyz,
+        req,
+        radius=radius,
+        radii=radii,
+        neighbourhood=neighbourhood,
+        k=k,
+        query_xyz=None if qi is None else cloud.xyz[qi],
+        query_ids=qi,
+        scanner=scanner,
+        height=height,
+        convention=convention,
+        d_max=d_max,
+        hist_bins=hist_bins,
+        msac_threshold=msac_threshold,
+        msac_iterations=msac_iterations,
+        seed=seed,
+        progress=progress,
+    )
+    if qi is not None:
+        result = cloud.subset(qi)
+    elif inplace:
+        result = cloud
+    else:
+        result = PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
+    for name in req.point:
+        result[name] = _point_feature(name, result)
+    result.update(arrays)
+    result.meta["features"] = list(req.point) + list(arrays)
+    return result
+
+
+def _point_feature(name: str, cloud: PointCloud) -> np.ndarray:
+    if name == "return_ratio":
+        if "return_number" not in cloud or "number_of_returns" not in cloud:
+            return np.full(len(cloud), np.nan, np.float32)
+        rn = cloud["return_number"].astype(np.float32)
+        nr = cloud["number_of_returns"].astype(np.float32)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(nr > 0, rn / nr, np.nan).astype(np.float32)
+    raise LidarfxError(f"unknown per-point feature {name!r}")  # pragma: no cover

@@ -1,0 +1,366 @@
+"""The fused neighbourhood-feature kernel.
+
+For every query point and scale the kernel finds the candidate runs of the
+sorted grid (:func:`lidarfx.neighbors.column_ranges`) and walks them:
+
+* pass 1 (always): the covariance sums of the chosen neighbourhood (sphere or
+  cylinder) relative to the query point — small numbers, numerically safe —
+  in a branch-free loop that the compiler vectorises; when density, height
+  or histogram features are requested, a second lean loop over the vertical
+  cylinder gives sphere / cylinder counts and the cylinder's z moments;
+* a closed-form eigen solve gives eigen, Westin, plane, density and height
+  features;
+* pass 2 (only when requested): the features that need the local plane
+  first — inlier ratio, slope-adaptive echo ratio, quadric curvature — plus
+  Lang's height-difference histogram and the octant / above-below counts.
+
+Queries are processed in grid order (``qorder``) so that consecutive queries
+share cached neighbours; results land at their original positions.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..neighbors import column_ranges
+from . import slots as S
+from .curvature import quadric_curvatures
+from .eigen import eigen_features, eigh3
+from .histogram import histogram_features
+
+KIND_SPHERE = 0
+KIND_CYLINDER = 1
+
+# reassociation lets LLVM vectorise the reductions; no NaN/inf assumptions
+_FAST = {"reassoc", "contract", "nsz"}
+
+# pass-1 sums: covariance neighbourhood
+_N, _SX, _SY, _SZ, _XX, _XY, _XZ, _YY, _YZ, _ZZ = range(10)
+# cylinder statistics
+_NSPH, _NCYL, _CZMIN, _CZMAX, _CZ, _CZZ, _CZZZ = range(10, 17)
+_NACC = 17
+# pass-2 counters
+_INL, _ECHO, _ABV, _BLW, _CABV, _CBLW = range(6)
+
+
+@nb.njit(cache=True, fastmath=_FAST)
+def _sum_cov(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, acc):
+    """Covariance sums over the sphere (or cylinder) of squared radius r2."""
+    n = sx = sy = sz = xx = xy = xz = yy = yz = zz = 0.0
+    for k in range(nr):
+        for j in range(lo[k], hi[k]):
+            dx = pts[j, 0] - qx
+            dy = pts[j, 1] - qy
+            dz = pts[j, 2] - qz
+            h2 = dx * dx + dy * dy
+            if cylinder:
+                w = 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
+            else:
+                w = 1.0 if h2 + dz * dz <= r2 else 0.0
+            n += w
+            sx += w * dx
+            sy += w * dy
+            sz += w * dz
+            xx += w * dx * dx
+            xy += w * dx * dy
+            xz += w * dx * dz
+            yy += w * dy * dy
+            yz += w * dy * dz
+            zz += w * dz * dz
+    acc[_N] = n
+    acc[_SX] = sx
+    acc[_SY] = sy
+    acc[_SZ] = sz
+    acc[_XX] = xx
+    acc[_XY] = xy
+    acc[_XZ] = xz
+    acc[_YY] = yy
+    acc[_YZ] = yz
+    acc[_ZZ] = zz
+
+
+@nb.njit(cache=True, fastmath=_FAST)
+def _sum_cyl(pts, lo, hi, nr, qx, qy, qz, r2, height, acc):
+    """Sphere count, cylinder count and the cylinder's z moments (relative to the query)."""
+    nsph = ncyl = cz = czz = czzz = 0.0
+    zmn = np.inf
+    zmx = -np.inf
+    for k in range(nr):
+        for j in range(lo[k], hi[k]):
+            dx = pts[j, 0] - qx
+            dy = pts[j, 1] - qy
+            dz = pts[j, 2] - qz
+            h2 = dx * dx + dy * dy
+            nsph += 1.0 if h2 + dz * dz <= r2 else 0.0
+            inc = h2 <= r2 and abs(dz) <= height
+            w = 1.0 if inc else 0.0
+            ncyl += w
+            cz += w * dz
+            czz += w * dz * dz
+            czzz += w * dz * dz * dz
+            zmn = min(zmn, dz if inc else np.inf)
+            zmx = max(zmx, dz if inc else -np.inf)
+    acc[_NSPH] = nsph
+    acc[_NCYL] = ncyl
+    acc[_CZMIN] = zmn
+    acc[_CZMAX] = zmx
+    acc[_CZ] = cz
+    acc[_CZZ] = czz
+    acc[_CZZZ] = czzz
+
+
+@nb.njit(cache=True, fastmath=_FAST)
+def _count_plane(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax, rr2, acc):
+    """Inliers of the local plane (within dmax) among the neighbours, and the
+    slope-adaptive echo count: cylinder points within the sphere of squared radius rr2."""
+    inl = echo = 0.0
+    for k in range(nr):
+        for j in range(lo[k], hi[k]):
+            dx = pts[j, 0] - qx
+            dy = pts[j, 1] - qy
+            dz = pts[j, 2] - qz
+            h2 = dx * dx + dy * dy
+            d2 = h2 + dz * dz
+            in_cyl = h2 <= r2 and abs(dz) <= height
+            member = in_cyl if cylinder else d2 <= r2
+            dist = (dx - cx) * nx_ + (dy - cy) * ny_ + (dz - cz) * nz_
+            inl += 1.0 if (member and abs(dist) <= dmax) else 0.0
+            echo += 1.0 if (in_cyl and d2 <= rr2) else 0.0
+    acc[_INL] = inl
+    acc[_ECHO] = echo
+
+
+@nb.njit(cache=True, inline="always")
+def _put(row, col, slot, value):
+    c = col[slot]
+    if c >= 0:
+        row[c] = value
+
+
+@nb.njit(cache=True, inline="always")
+def _any(col, first, last):
+    for sl in range(first, last + 1):
+        if col[sl] >= 0:
+            return True
+    return False
+
+
+@nb.njit(cache=True, parallel=True)
+def point_features(
+    pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
+    q,  # (m, 3) query points, local coordinates
+    qorder,  # query ids to process, in grid order (a block of the full order)
+    rad,  # (1 or m, S) radii per scale, ascending (one per point for kNN)
+    kind,  # KIND_SPHERE / KIND_CYLINDER: neighbourhood of the covariance features
+    height,  # half-height of the cylinder (inf = unbounded)
+    scanner,  # (3,) scanner position (local) for normal orientation
+    has_scanner,
+    col,  # (NSLOTS,) slot -> output column or -1
+    convention,
+    dmax,  # inlier distance for plane_inlier_ratio
+    nbins,  # histogram bins
+    need_cyl,
+    need_pass2,
+    nbuf,  # size of the column-run buffers
+    out,  # (S, F, m) float32, pre-filled with NaN (out[s, f] is one contiguous feature)
+):
+    m = qorder.shape[0]
+    nscale = rad.shape[1]
+    per_point = rad.shape[0] > 1
+    cyl_kind = kind == KIND_CYLINDER
+    want_curv = _any(col, S.K1, S.GAUSS_CURVATURE)
+    want_hist = _any(col, S.DH_PEAKS, S.DH_MAX_BIN)
+    want_dist = _any(col, S.OCTANT_OCCUPANCY, S.Z_ASYMMETRY)
+    want_plane_counts = col[S.PLANE_INLIER_RATIO] >= 0 or col[S.ECHO_RATIO_SLOPE] >= 0
+    chunk = 256
+    nchunk = (m + chunk - 1) // chunk
+    for ch in nb.prange(nchunk):
+        lo = np.empty(nbuf, np.int64)
+        hi = np.empty(nbuf, np.int64)
+        clo = np.empty(nbuf, np.int64)
+        chi = np.empty(nbuf, np.int64)
+        acc = np.empty(_NACC)
+        p2 = np.empty(6)
+        quad = np.empty(27)
+        hist = np.empty(nbins)
+        lam = np.empty(3)
+        v1 = np.empty(3)
+        v3 = np.empty(3)
+        v2 = np.empty(3)
+        work = np.empty(48)
+        for t in range(ch * chunk, min(m, ch * chunk + chunk)):
+            i = qorder[t]
+            row = i if per_point else 0
+            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+            for s in range(nscale):
+                r = rad[row, s]
+                r2 = r * r
+                o = out[s, :, i]
+                zwin = max(height, r) if cyl_kind else r
+                nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zwin, lo, hi)
+                _sum_cov(pts, lo, hi, nr, qx, qy, qz, r2, height, cyl_kind, acc)
+                ncr = 0
+                if need_cyl:
+                    if cyl_kind:
+                        clo[:nr] = lo[:nr]
+                        chi[:nr] = hi[:nr]
+                        ncr = nr
+                    else:
+                        ncr = column_ranges(
+                            pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, max(height, r), clo, chi
+                        )
+                    _sum_cyl(pts, clo, chi, ncr, qx, qy, qz, r2, height, acc)
+                n = acc[_N]
+                _put(o, col, S.N_NEIGHBOURS, n)
+                nsph = acc[_NSPH]
+                ncyl = acc[_NCYL]
+                if need_cyl and ncyl > 0.0:
+                    d2d = ncyl / (math.pi * r2)
+                    d3d = nsph / (4.0 / 3.0 * math.pi * r2 * r)
+                    _put(o, col, S.DENSITY_2D, d2d)
+                    _put(o, col, S.DENSITY_3D, d3d)
+                    _put(o, col, S.DENSITY_RATIO, d3d / d2d)
+                    _put(o, col, S.NEIGHBOUR_RATIO, nsph / ncyl)
+                    _put(o, col, S.ECHO_RATIO, 100.0 * nsph / ncyl)
+                    # height features (Chehata 2009), relative to the query's z
+                    _put(o, col, S.DZ_BELOW, -acc[_CZMIN])
+                    _put(o, col, S.DZ_ABOVE, acc[_CZMAX])
+                    _put(o, col, S.Z_RANGE, acc[_CZMAX] - acc[_CZMIN])
+                    mz = acc[_CZ] / ncyl
+                    var = max(acc[_CZZ] / ncyl - mz * mz, 0.0)
+                    _put(o, col, S.Z_STD, math.sqrt(var))
+                    # dh = z_p - z_j = -dz: same std (metres), opposite skewness
+                    _put(o, col, S.DH_STD, math.sqrt(var))
+                    if var > 1e-24:
+                        m3 = acc[_CZZZ] / ncyl - 3.0 * mz * acc[_CZZ] / ncyl + 2.0 * mz * mz * mz
+                        _put(o, col, S.DH_SKEWNESS, -m3 / (var * math.sqrt(var)))
+                    else:
+                        _put(o, col, S.DH_SKEWNESS, 0.0)
+                plane_ok = False
+                cx = cy = cz = 0.0
+                nxv = nyv = nzv = 0.0
+                slope = 0.0
+                if n > 0.0:
+                    cx = acc[_SX] / n
+                    cy = acc[_SY] / n
+                    cz = acc[_SZ] / n
+                    _put(o, col, S.CENTROID_OFFSET, math.sqrt(cx * cx + cy * cy + cz * cz) / r)
+                if n >= 3.0:
+                    eigh3(
+                        acc[_XX] / n - cx * cx, acc[_XY] / n - cx * cy, acc[_XZ] / n - cx * cz,
+                        acc[_YY] / n - cy * cy, acc[_YZ] / n - cy * cz, acc[_ZZ] / n - cz * cz,
+                        lam, v1, v3, work,
+                    )
+                    # orient the normal: towards the scanner, else up
+                    nxv, nyv, nzv = v3[0], v3[1], v3[2]
+                    if has_scanner:
+                        if nxv * (scanner[0] - qx) + nyv * (scanner[1] - qy) + nzv * (scanner[2] - qz) < 0.0:
+                            nxv, nyv, nzv = -nxv, -nyv, -nzv
+                    elif nzv < 0.0:
+                        nxv, nyv, nzv = -nxv, -nyv, -nzv
+                    eigen_features(lam, nzv, convention, col, o)
+                    slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
+                    _put(o, col, S.NORMAL_X, nxv)
+                    _put(o, col, S.NORMAL_Y, nyv)
+                    _put(o, col, S.NORMAL_Z, nzv)
+                    _put(o, col, S.SLOPE, slope)
+                    if slope >= 0.1:
+                        sg = 1.0 if nzv >= 0.0 else -1.0  # aspect of the up-facing normal
+                        _put(o, col, S.ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
+                    _put(o, col, S.PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
+                    _put(o, col, S.PLANE_STD, math.sqrt(lam[2]))
+                    e1x, e1y, e1z = v1[0], v1[1], v1[2]
+                    if e1z < 0.0 or (e1z == 0.0 and e1x < 0.0):
+                        e1x, e1y, e1z = -e1x, -e1y, -e1z
+                    _put(o, col, S.EIGENVECTOR1_X, e1x)
+                    _put(o, col, S.EIGENVECTOR1_Y, e1y)
+                    _put(o, col, S.EIGENVECTOR1_Z, e1z)
+                    v2[0] = nyv * v1[2] - nzv * v1[1]
+                    v2[1] = nzv * v1[0] - nxv * v1[2]
+                    v2[2] = nxv * v1[1] - nyv * v1[0]
+                    plane_ok = True
+                if not need_pass2:
+                    continue
+                # ------------------------------------------------------ pass 2
+                # the runs of the widest window walked in pass 1
+                wl = clo if need_cyl else lo
+                wh = chi if need_cyl else hi
+                nw = ncr if need_cyl else nr
+                if plane_ok and want_plane_counts:
+                    rr = r / math.cos(math.radians(min(slope, 80.0)))
+                    _count_plane(
+                        pts, wl, wh, nw, qx, qy, qz, r2, height, cyl_kind,
+                        cx, cy, cz, nxv, nyv, nzv, dmax, rr * rr, p2,
+                    )
+                    _put(o, col, S.PLANE_INLIER_RATIO, p2[_INL] / n)
+                    if need_cyl and ncyl > 0.0:
+                        _put(o, col, S.ECHO_RATIO_SLOPE, 100.0 * p2[_ECHO] / ncyl)
+                if not (want_hist or want_dist or (want_curv and plane_ok)):
+                    continue
+                p2[:] = 0.0
+                quad[:] = 0.0
+                hist[:] = 0.0
+                octbits = 0
+                amax = 0.0
+                if need_cyl:
+                    amax = max(-acc[_CZMIN], acc[_CZMAX])
+                for k in range(nw):
+                    for j in range(wl[k], wh[k]):
+                        dx = pts[j, 0] - qx
+                        dy = pts[j, 1] - qy
+                        dz = pts[j, 2] - qz
+                        h2 = dx * dx + dy * dy
+                        d2 = h2 + dz * dz
+                        in_cyl = h2 <= r2 and abs(dz) <= height
+                        if in_cyl and want_hist:
+                            u = 0.0 if amax <= 0.0 else -dz / amax
+                            b = int((u + 1.0) * 0.5 * nbins)
+                            b = min(max(b, 0), nbins - 1)
+                            hist[b] += 1.0
+                            if dz > 0.0:
+                                p2[_CABV] += 1.0
+                            elif dz < 0.0:
+                                p2[_CBLW] += 1.0
+                        if not (in_cyl if cyl_kind else d2 <= r2):
+                            continue
+                        if want_dist:
+                            if dz > 0.0:
+                                p2[_ABV] += 1.0
+                            elif dz < 0.0:
+                                p2[_BLW] += 1.0
+                            if d2 > 0.0:
+                                octbits |= 1 << ((dx > 0.0) * 4 + (dy > 0.0) * 2 + (dz > 0.0))
+                        if want_curv and plane_ok:
+                            uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
+                            ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
+                            hh = (dx * nxv + dy * nyv + dz * nzv) / r
+                            accumulate_quadric(quad, uu, ww, hh)
+                if want_hist and need_cyl and ncyl > 0.0:
+                    histogram_features(hist, ncyl, p2[_CABV], p2[_CBLW], col, o)
+                if want_dist and n > 0.0:
+                    cnt = 0
+                    while octbits:
+                        cnt += octbits & 1
+                        octbits >>= 1
+                    _put(o, col, S.OCTANT_OCCUPANCY, cnt)
+                    _put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
+                if want_curv and plane_ok and n >= 6.0:
+                    quadric_curvatures(quad, r, work, col, o)
+
+
+@nb.njit(cache=True, inline="always")
+def accumulate_quadric(qa, u, w, h):
+    """Add one point to the normal equations of h = a + b u + c w + d u² + e u w + f w².
+
+    ``qa[0:21]`` holds the upper triangle of AᵀA row by row, ``qa[21:27]`` Aᵀh
+    """
+    basis = (1.0, u, w, u * u, u * w, w * w)
+    t = 0
+    for r in range(6):
+        br = basis[r]
+        for c in range(r, 6):
+            qa[t] += br * basis[c]
+            t += 1
+        qa[21 + r] += br * h

@@ -1,0 +1,199 @@
+"""Robust local planes by MSAC (Torr & Zisserman 2000).
+
+For every query point the neighbours of the chosen neighbourhood are
+gathered into a per-thread buffer; random triples (seeded per point, so the
+result does not depend on threads or chunking) propose planes scored by the
+MSAC cost Σ min(e², t²); the number of trials adapts to the inlier share
+(99 % confidence, at least ``min_iter``, at most ``max_iter``).  The best
+hypothesis' inliers are refitted by PCA and give the ``msac_*`` features:
+normal (oriented like the ordinary normal), slope, aspect, plane distance of
+the query point, RMS of the inlier distances and the inlier share.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..neighbors import column_ranges
+from . import slots as S
+from .eigen import eigh3
+
+
+@nb.njit(cache=True, inline="always")
+def _put(row, col, slot, value):
+    c = col[slot]
+    if c >= 0:
+        row[c] = value
+
+
+@nb.njit(cache=True, inline="always")
+def _splitmix(state):
+    state = (state + np.uint64(0x9E3779B97F4A7C15)) & np.uint64(0xFFFFFFFFFFFFFFFF)
+    z = state
+    z = ((z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)) & np.uint64(0xFFFFFFFFFFFFFFFF)
+    z = ((z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)) & np.uint64(0xFFFFFFFFFFFFFFFF)
+    return state, z ^ (z >> np.uint64(31))
+
+
+@nb.njit(cache=True, parallel=True)
+def msac_features(
+    pts, cstart, cend, ckey, table, nx, ny, cell,
+    q, qorder, qid, rad, scale, kind, height, scanner, has_scanner,
+    col, thr, min_iter, max_iter, seed, nbuf, out,
+):
+    """MSAC plane features for scale ``scale`` of ``rad``; writes ``out[scale, :, i]``.
+
+    ``qid`` are global query ids used to seed each point's generator.
+    """
+    m = qorder.shape[0]
+    per_point = rad.shape[0] > 1
+    chunk = 256
+    nchunk = (m + chunk - 1) // chunk
+    thr2 = thr * thr
+    for ch in nb.prange(nchunk):
+        lo = np.empty(nbuf, np.int64)
+        hi = np.empty(nbuf, np.int64)
+        buf = np.empty((256, 3))
+        lam = np.empty(3)
+        v1 = np.empty(3)
+        v3 = np.empty(3)
+        work = np.empty(12)
+        for t in range(ch * chunk, min(m, ch * chunk + chunk)):
+            i = qorder[t]
+            r = rad[i if per_point else 0, scale]
+            r2 = r * r
+            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+            zh = r if kind == 0 else max(height, r)
+            nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
+            cnt = 0
+            for k in range(nr):
+                for j in range(lo[k], hi[k]):
+                    dx = pts[j, 0] - qx
+                    dy = pts[j, 1] - qy
+                    dz = pts[j, 2] - qz
+                    h2 = dx * dx + dy * dy
+                    if kind == 0:
+                        if h2 + dz * dz > r2:
+                            continue
+                    elif h2 > r2 or abs(dz) > height:
+                        continue
+                    if cnt == buf.shape[0]:
+                        nbuf2 = np.empty((2 * cnt, 3))
+                        nbuf2[:cnt] = buf
+                        buf = nbuf2
+                    buf[cnt, 0] = dx
+                    buf[cnt, 1] = dy
+                    buf[cnt, 2] = dz
+                    cnt += 1
+            if cnt < 3:
+                continue
+            state = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(qid[i])
+            best = np.inf
+            bnx = bny = bnz = bd = 0.0
+            t = 0
+            need = max_iter
+            while t < need and t < max_iter:
+                t += 1
+                state, a = _splitmix(state)
+                state, b = _splitmix(state)
+                state, c = _splitmix(state)
+                ia = int(a % np.uint64(cnt))
+                ib = int(b % np.uint64(cnt))
+                ic = int(c % np.uint64(cnt))
+                if ia == ib or ia == ic or ib == ic:
+                    continue
+                ux = buf[ib, 0] - buf[ia, 0]
+                uy = buf[ib, 1] - buf[ia, 1]
+                uz = buf[ib, 2] - buf[ia, 2]
+                wx = buf[ic, 0] - buf[ia, 0]
+                wy = buf[ic, 1] - buf[ia, 1]
+                wz = buf[ic, 2] - buf[ia, 2]
+                nxv = uy * wz - uz * wy
+                nyv = uz * wx - ux * wz
+                nzv = ux * wy - uy * wx
+                nn = math.sqrt(nxv * nxv + nyv * nyv + nzv * nzv)
+                if nn <= 1e-12 * (ux * ux + uy * uy + uz * uz + wx * wx + wy * wy + wz * wz):
+                    continue
+                nxv /= nn
+                nyv /= nn
+                nzv /= nn
+                d0 = nxv * buf[ia, 0] + nyv * buf[ia, 1] + nzv * buf[ia, 2]
+                cost = 0.0
+                ninl = 0
+                for j in range(cnt):
+                    e = nxv * buf[j, 0] + nyv * buf[j, 1] + nzv * buf[j, 2] - d0
+                    e2 = e * e
+                    if e2 < thr2:
+                        cost += e2
+                        ninl += 1
+                    else:
+                        cost += thr2
+                    if cost >= best:
+                        break
+                if cost < best:
+                    best = cost
+                    bnx, bny, bnz, bd = nxv, nyv, nzv, d0
+                    w = ninl / cnt
+                    w3 = w * w * w
+                    if w3 >= 1.0 - 1e-12:
+                        need = min_iter
+                    elif w3 > 0.0:
+                        need = max(min_iter, int(math.ceil(math.log(0.01) / math.log(1.0 - w3))))
+            if best == np.inf:
+                continue
+            # refit the inliers by PCA
+            sx = sy = sz = 0.0
+            ninl = 0
+            for j in range(cnt):
+                e = bnx * buf[j, 0] + bny * buf[j, 1] + bnz * buf[j, 2] - bd
+                if e * e <= thr2:
+                    sx += buf[j, 0]
+                    sy += buf[j, 1]
+                    sz += buf[j, 2]
+                    ninl += 1
+            if ninl < 3:
+                continue
+            cx, cy, cz = sx / ninl, sy / ninl, sz / ninl
+            cxx = cxy = cxz = cyy = cyz = czz = 0.0
+            for j in range(cnt):
+                e = bnx * buf[j, 0] + bny * buf[j, 1] + bnz * buf[j, 2] - bd
+                if e * e <= thr2:
+                    ex = buf[j, 0] - cx
+                    ey = buf[j, 1] - cy
+                    ez = buf[j, 2] - cz
+                    cxx += ex * ex
+                    cxy += ex * ey
+                    cxz += ex * ez
+                    cyy += ey * ey
+                    cyz += ey * ez
+                    czz += ez * ez
+            eigh3(cxx / ninl, cxy / ninl, cxz / ninl, cyy / ninl, cyz / ninl, czz / ninl, lam, v1, v3, work)
+            nxv, nyv, nzv = v3[0], v3[1], v3[2]
+            if has_scanner:
+                if nxv * (scanner[0] - qx) + nyv * (scanner[1] - qy) + nzv * (scanner[2] - qz) < 0.0:
+                    nxv, nyv, nzv = -nxv, -nyv, -nzv
+            elif nzv < 0.0:
+                nxv, nyv, nzv = -nxv, -nyv, -nzv
+            # inliers of the refined plane
+            ss = 0.0
+            nin2 = 0
+            for j in range(cnt):
+                e = (buf[j, 0] - cx) * nxv + (buf[j, 1] - cy) * nyv + (buf[j, 2] - cz) * nzv
+                if e * e <= thr2:
+                    ss += e * e
+                    nin2 += 1
+            o = out[scale, :, i]
+            slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
+            _put(o, col, S.MSAC_NORMAL_X, nxv)
+            _put(o, col, S.MSAC_NORMAL_Y, nyv)
+            _put(o, col, S.MSAC_NORMAL_Z, nzv)
+            _put(o, col, S.MSAC_SLOPE, slope)
+            if slope >= 0.1:
+                sg = 1.0 if nzv >= 0.0 else -1.0
+                _put(o, col, S.MSAC_ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
+            _put(o, col, S.MSAC_PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
+            if nin2 > 0:
+                _put(o, col, S.MSAC_PLANE_STD, math.sqrt(ss / nin2))
+            _put(o, col, S.MSAC_INLIER_RATIO, nin2 / cnt)

@@ -1,0 +1,361 @@
+"""Reading, writing and summarising point-cloud files.
+
+One entry point per job, dispatching on the file extension (case-insensitive):
+
+===========================================  ==========================
+extension                                    module
+===========================================  ==========================
+``.las`` ``.laz``                            :mod:`lidarfx.io.las`
+``.ply``                                     :mod:`lidarfx.io.ply`
+``.xyz`` ``.txt`` ``.csv`` ``.pts``          :mod:`lidarfx.io.ascii`
+``.xyz_label_conf`` (Oakland 3-D)            :mod:`lidarfx.io.ascii`
+``.npy`` ``.npz``                            :mod:`lidarfx.io.npy`
+===========================================  ==========================
+
+Every format module exposes ``read(path, *, columns, progress)``,
+``write(cloud, path, *, ext, progress, **opts)``, ``READ_ERRORS`` (the library
+exceptions that mean "this file is damaged") and ``ACCEPTS_COLUMNS``.
+Format modules are imported on first use so ``lidarfx --help`` stays fast.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib
+import inspect
+import os
+import sys
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+import numpy as np
+
+from .._atomic import atomic_path, check_not_same_file
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+
+__all__ = ["read", "write", "info", "FORMATS", "ASPRS_CLASSES", "progress_bar"]
+
+FORMATS: dict[str, str] = {
+    ".las": "las",
+    ".laz": "las",
+    ".ply": "ply",
+    ".xyz": "ascii",
+    ".txt": "ascii",
+    ".csv": "ascii",
+    ".pts": "ascii",
+    ".xyz_label_conf": "ascii",
+    ".npy": "npy",
+    ".npz": "npy",
+}
+"""Lower-case file extension -> format module name."""
+
+AUTO_PROGRESS_POINTS = 2_000_000
+"""``progress=None`` shows a bar only above this many points (and only on a terminal)."""
+
+DENSITY_CELL_M = 1.0
+"""Edge of the grid cells (metres) used for the occupied-area density."""
+
+ASPRS_CLASSES: dict[int, str] = {
+    0: "never classified",
+    1: "unclassified",
+    2: "ground",
+    3: "low vegetation",
+    4: "medium vegetation",
+    5: "high vegetation",
+    6: "building",
+    7: "low point (noise)",
+    8: "model key-point",
+    9: "water",
+    10: "rail",
+    11: "road surface",
+    12: "overlap",
+    13: "wire - guard (shield)",
+    14: "wire - conductor (phase)",
+    15: "transmission tower",
+    16: "wire-structure connector",
+    17: "bridge deck",
+    18: "high noise",
+    19: "overhead structure",
+    20: "ignored ground",
+    21: "snow",
+    22: "temporal exclusion",
+}
+"""ASPRS LAS 1.4 (R15) class names; 8 and 12 are the LAS 1.0-1.3 meanings."""
+
+
+# ----------------------------------------------------------------- helpers
+def _format_module(path: Path):
+    ext = path.suffix.lower()
+    try:
+        name = FORMATS[ext]
+    except KeyError:
+        known = " ".join(sorted(FORMATS))
+        raise LidarfxError(
+            f"{path}: unknown file extension {path.suffix or '(none)'!r}; known: {known}"
+        ) from None
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def _input_module(path: Path):
+    """The format module for an existing input file (else a one-line error)."""
+    module = _format_module(path)
+    if not path.exists():
+        raise LidarfxError(f"file not found: {path}")
+    if not path.is_file():
+        raise LidarfxError(f"not a file: {path}")
+    return module
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or exc.__class__.__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+@contextlib.contextmanager
+def progress_bar(total: int, description: str, enabled: bool | None) -> Iterator[Callable[[int], None]]:
+    """Yield an ``advance(n_points)`` callable, drawing a rich progress bar on stderr.
+
+    ``enabled=None`` means automatic: a bar only when ``total`` exceeds
+    :data:`AUTO_PROGRESS_POINTS` and stderr is a terminal.
+    """
+    if enabled is None:
+        enabled = total > AUTO_PROGRESS_POINTS and sys.stderr.isatty()
+    if not enabled:
+        yield lambda n: None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    columns = (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:,}/{task.total:,} pts"),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda n: bar.advance(task, n)
+
+
+def _normalise_columns(columns: str | Sequence[str] | None) -> list[str] | None:
+    if columns is None:
+        return None
+    if isinstance(columns, str):
+        columns = columns.split(",")
+    return [str(c).strip() for c in columns]
+
+
+# --------------------------------------------------------------- read/write
+def read(
+    path: str | os.PathLike,
+    *,
+    columns: str | Sequence[str] | None = None,
+    progress: bool | None = None,
+) -> PointCloud:
+    """Read a point cloud from any supported file.
+
+    Parameters
+    ----------
+    path:
+        File to read; the extension chooses the format (see :data:`FORMATS`).
+    columns:
+        Column spec for text and plain ``.npy`` files, e.g.
+        ``["x", "y", "z", "intensity", "classification"]`` or ``"x,y,z,-,label"``
+        (``"-"`` / ``"skip"`` drops a column).  Rejected for other formats.
+    progress:
+        ``True`` shows a progress bar, ``False`` never; ``None`` decides by size.
+
+    Returns
+    -------
+    PointCloud
+        ``meta["source"]`` holds the resolved input path, ``meta["format"]`` the
+        format module name.
+
+    Raises
+    ------
+    LidarfxError
+        Unknown extension, missing file, bad column spec or damaged file; the
+        message is one line and names the file.
+    """
+    p = Path(path)
+    module = _input_module(p)
+    cols = _normalise_columns(columns)
+    if cols is not None and not module.ACCEPTS_COLUMNS:
+        raise LidarfxError(f"{p}: a column spec applies only to text and .npy files")
+    try:
+        cloud = module.read(p, columns=cols, progress=progress)
+    except LidarfxError as exc:  # name the file in the message
+        if str(p) in str(exc):
+            raise
+        raise LidarfxError(f"{p}: {exc}") from exc
+    except module.READ_ERRORS as exc:
+        raise LidarfxError(f"cannot read {p}: {_one_line(exc)}") from exc
+    cloud.meta["source"] = str(p.resolve())
+    cloud.meta["format"] = module.__name__.rsplit(".", 1)[-1]
+    return cloud
+
+
+def write(cloud: PointCloud, path: str | os.PathLike, *, progress: bool | None = None, **opts: Any) -> Path:
+    """Write ``cloud`` to ``path``; the extension chooses the format.
+
+    The file is written to a temporary name in the target folder and renamed at
+    the end, so a failure never leaves a partial output.  Writing over the
+    cloud's own input file (``cloud.meta["source"]``) is refused.
+
+    Format options (``**opts``): LAS/LAZ ``point_format``, ``scale``; PLY
+    ``ascii``; text ``precision``, ``delimiter``; ``.npz`` ``compressed``.
+    Unknown options raise :class:`LidarfxError`.
+
+    Returns the output path.
+    """
+    p = Path(path)
+    module = _format_module(p)
+    allowed = [
+        name
+        for name, prm in inspect.signature(module.write).parameters.items()
+        if prm.kind is inspect.Parameter.KEYWORD_ONLY and name not in ("ext", "progress")
+    ]
+    unknown = sorted(set(opts) - set(allowed))
+    if unknown:
+        raise LidarfxError(
+            f"{p}: option(s) {', '.join(unknown)} not supported for {p.suffix} output"
+            f" (supported: {', '.join(allowed) or 'none'})"
+        )
+    source = cloud.meta.get("source")
+    if source:
+        check_not_same_file(source, p)
+    with atomic_path(p) as tmp:
+        try:
+            module.write(cloud, tmp, ext=p.suffix.lower(), progress=progress, **opts)
+        except LidarfxError as exc:  # name the file in the message
+            if str(p) in str(exc):
+                raise
+            raise LidarfxError(f"{p}: {exc}") from exc
+        except OSError as exc:  # disk full, permissions, ...
+            raise LidarfxError(f"cannot write {p}: {exc.strerror or _one_line(exc)}") from exc
+    return p
+
+
+# ---------------------------------------------------------------------- info
+class _Summary:
+    """Streaming accumulator for :func:`info`: feed chunks, read the result once."""
+
+    def __init__(self, unit_to_metre: float) -> None:
+        self.cell = DENSITY_CELL_M / unit_to_metre  # cell edge in coordinate units
+        self.unit_to_metre = unit_to_metre
+        self.n = 0
+        self.lo = np.full(3, np.inf)
+        self.hi = np.full(3, -np.inf)
+        self.cells: list[np.ndarray] = []
+        self.counts: dict[str, dict[int, int]] = {}
+        self.dtypes: dict[str, str] = {}
+
+    def add(self, xyz: np.ndarray, attrs: dict[str, np.ndarray]) -> None:
+        for name, arr in attrs.items():
+            self.dtypes.setdefault(name, str(arr.dtype))
+        if len(xyz) == 0:
+            return
+        self.n += len(xyz)
+        self.lo = np.minimum(self.lo, xyz.min(axis=0))
+        self.hi = np.maximum(self.hi, xyz.max(axis=0))
+        ix = np.floor(xyz[:, 0] / self.cell).astype(np.int64)
+        iy = np.floor(xyz[:, 1] / self.cell).astype(np.int64)
+        self.cells.append(np.unique((ix << 32) + (iy & 0xFFFFFFFF)))
+        for name in ("classification", "return_number", "number_of_returns"):
+            if name in attrs:
+                values, counts = np.unique(attrs[name], return_counts=True)
+                acc = self.counts.setdefault(name, {})
+                for v, c in zip(values.tolist(), counts.tolist()):
+                    acc[v] = acc.get(v, 0) + c
+
+    def result(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"points": int(self.n)}
+        if self.n == 0:
+            out.update(bounds=None, density=None)
+        else:
+            occupied = int(np.unique(np.concatenate(self.cells)).size)
+            dx, dy = (self.hi[:2] - self.lo[:2]) * self.unit_to_metre
+            out["bounds"] = {"min": self.lo.tolist(), "max": self.hi.tolist()}
+            out["density"] = {
+                "per_m2_occupied_cells": self.n / (occupied * DENSITY_CELL_M**2),
+                "per_m2_bbox": self.n / (dx * dy) if dx * dy > 0 else None,
+                "occupied_cells": occupied,
+                "cell_size_m": DENSITY_CELL_M,
+            }
+        classes = self.counts.get("classification")
+        out["classes"] = (
+            None
+            if classes is None
+            else [
+                {"code": int(k), "name": ASPRS_CLASSES.get(int(k)), "count": int(c)}
+                for k, c in sorted(classes.items())
+            ]
+        )
+        returns = {
+            name: {str(int(k)): int(c) for k, c in sorted(self.counts[name].items())}
+            for name in ("return_number", "number_of_returns")
+            if name in self.counts
+        }
+        out["returns"] = returns or None
+        out["attributes"] = dict(self.dtypes)
+        return out
+
+
+def info(source: str | os.PathLike | PointCloud) -> dict[str, Any]:
+    """Summarise a file or an in-memory cloud as a JSON-serialisable dict.
+
+    Keys: ``file``, ``format``, ``points``, ``bounds`` (``min``/``max`` xyz),
+    ``density``, ``classes`` (list of ``{code, name, count}``; names are ASPRS),
+    ``returns`` (histograms of ``return_number`` / ``number_of_returns``),
+    ``attributes`` (name -> dtype), ``crs`` and ``las`` (version, point format,
+    scales, offsets, VLRs; ``None`` for other formats).
+
+    Density is given two ways, both in points per square metre:
+    ``per_m2_occupied_cells`` = n / (number of occupied 1 m x 1 m grid cells, in
+    plan view), robust to irregular outlines and holes; ``per_m2_bbox`` =
+    n / area of the xy bounding box, the figure most tools print.  When the CRS
+    says the coordinates are in feet, the grid and the area are converted to
+    metres; with no CRS the coordinates are taken as metres; with geographic
+    (longitude/latitude) coordinates ``density`` is ``None``.
+
+    LAS/LAZ files are streamed in chunks, so files larger than memory work.
+    """
+    from . import las
+
+    if isinstance(source, PointCloud):
+        header = source.header if isinstance(source.header, las.LasHeader) else None
+        chunks: Any = [source]
+        out: dict[str, Any] = {
+            "file": source.meta.get("source"),
+            "format": source.meta.get("format"),
+        }
+    else:
+        p = Path(source)
+        module = _input_module(p)
+        out = {"file": str(p), "format": module.__name__.rsplit(".", 1)[-1]}
+        if module is las:
+            try:
+                header = las.read_header(p)
+                chunks = las.iter_chunks(p)
+            except las.READ_ERRORS as exc:
+                raise LidarfxError(f"cannot read {p}: {_one_line(exc)}") from exc
+        else:
+            cloud = read(p)
+            header, chunks = None, [cloud]
+    crs = las.crs_info(header) if header is not None else None
+    unit = (crs or {}).get("unit_to_metre") or 1.0
+    summary = _Summary(unit)
+    try:
+        for chunk in chunks:
+            summary.add(chunk.xyz, chunk.attrs)
+    except las.READ_ERRORS as exc:
+        raise LidarfxError(f"cannot read {out['file']}: {_one_line(exc)}") from exc
+    out.update(summary.result())
+    if (crs or {}).get("geographic"):
+        out["density"] = None  # degrees: no metric area without a projection
+    elif out["density"] is not None:
+        out["density"]["unit_to_metre"] = unit
+        out["density"]["unit_assumed"] = not (crs or {}).get("unit_to_metre")
+    out["crs"] = crs
+    out["las"] = las.header_info(header) if header is not None else None
+    return out

@@ -1,0 +1,211 @@
+"""Text point clouds: ``.xyz`` ``.txt`` ``.csv`` ``.pts`` and Oakland ``.xyz_label_conf``.
+
+Reading
+    * Lines starting with ``#`` and blank lines are skipped.
+    * The delimiter is detected on the first data line: ``;`` if present, else
+      ``,``, else whitespace (spaces / tabs).
+    * Column names come from, in order: the ``columns`` spec (``"-"`` or
+      ``"skip"`` drops a column; columns beyond the spec are ignored), a header
+      line (the first non-comment line when one of its fields is not a number,
+      e.g. CloudCompare's ``//X,Y,Z,R,G,B`` or ``x y z intensity``; names are
+      lower-cased, quotes and a leading ``//`` removed, ``r/g/b`` read as
+      ``red/green/blue``), the format default (Oakland: ``x y z label
+      confidence``), else ``x, y, z, col3, col4, ...``.
+    * Values are parsed as float64 (``numpy.loadtxt``); columns named like an
+      integer LAS dimension (``classification``, ``return_number``,
+      ``intensity``, ``red`` ...) or ``label`` / ``segment_id`` become that
+      integer dtype when every value is a whole number in range.
+
+Writing
+    A header line of names, then ``x y z`` with ``precision`` decimals
+    (default 3 = millimetres) and the attributes: integers as integers,
+    float32 with 7 and float64 with 15 significant digits.  Space-separated,
+    comma-separated for ``.csv``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+
+ACCEPTS_COLUMNS = True
+READ_ERRORS = (ValueError, UnicodeDecodeError, OSError)
+
+SKIP_NAMES = frozenset({"-", "skip"})
+DEFAULT_COLUMNS = {".xyz_label_conf": ["x", "y", "z", "label", "confidence"]}
+_ALIASES = {"r": "red", "g": "green", "b": "blue", "class": "classification"}
+_EXTRA_INTEGER_COLUMNS = {"label": np.dtype(np.int32), "segment_id": np.dtype(np.int32)}
+_WRITE_BLOCK = 100_000
+
+
+def _integer_columns() -> dict[str, np.dtype]:
+    from .las import standard_dtypes
+
+    ints = {k: v for k, v in standard_dtypes().items() if v.kind in "iu"}
+    return {**ints, **_EXTRA_INTEGER_COLUMNS}
+
+
+def _data_lines(path: Path) -> Iterator[tuple[int, str]]:
+    """(line index, stripped text) of the lines that are not blank and not ``#`` comments."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for i, line in enumerate(fh):
+            text = line.strip()
+            if text and not text.startswith("#"):
+                yield i, text
+
+
+def _delimiter(line: str) -> str | None:
+    for d in (";", ","):
+        if d in line:
+            return d
+    return None  # whitespace
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    return [t.strip() for t in line.split(delimiter)] if delimiter else line.split()
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _header_name(token: str) -> str:
+    name = token.strip().strip("\"'")
+    if name.startswith("//"):
+        name = name[2:]
+    name = "_".join(name.strip().lower().split())
+    return _ALIASES.get(name, name)
+
+
+def _resolve_names(spec: list[str] | None, header: list[str] | None, ncols: int, ext: str) -> list[str]:
+    if spec is not None:
+        if len(spec) > ncols:
+            raise LidarfxError(f"column spec has {len(spec)} names but the file has {ncols} columns")
+        names = [s.strip() for s in spec]
+    elif header is not None:
+        if len(header) != ncols:
+            raise LidarfxError(f"header line has {len(header)} names but the data has {ncols} columns")
+        names = header
+    elif ext in DEFAULT_COLUMNS and len(DEFAULT_COLUMNS[ext]) <= ncols:
+        names = DEFAULT_COLUMNS[ext]
+    else:
+        names = ["x", "y", "z"][:ncols] + [f"col{i}" for i in range(3, ncols)]
+    kept = [n for n in names if n not in SKIP_NAMES]
+    if any(not n for n in kept):
+        raise LidarfxError("empty column name in the column spec")
+    dup = sorted({n for n in kept if kept.count(n) > 1})
+    if dup:
+        raise LidarfxError(f"duplicate column name(s): {', '.join(dup)}")
+    missing = [c for c in ("x", "y", "z") if c not in kept]
+    if missing:
+        raise LidarfxError(f"no column named {', '.join(missing)} (columns: {', '.join(names)})")
+    return names
+
+
+def _narrow(name: str, values: np.ndarray, ints: dict[str, np.dtype]) -> np.ndarray:
+    """Integer dtype for integer-valued columns with an integer meaning, else unchanged."""
+    dtype = ints.get(name)
+    if dtype is None:
+        return values
+    info = np.iinfo(dtype)
+    if values.size == 0 or (
+        np.isfinite(values).all()
+        and (values == np.trunc(values)).all()
+        and values.min() >= info.min
+        and values.max() <= info.max
+    ):
+        return values.astype(dtype)
+    return values
+
+
+def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
+    """Read a text point cloud (see the module docstring for the rules)."""
+    lines = _data_lines(path)
+    first = next(lines, None)
+    header: list[str] | None = None
+    skiprows = 0
+    if first is not None:
+        delimiter = _delimiter(first[1])
+        tokens = _split(first[1], delimiter)
+        if not all(_is_number(t) for t in tokens):
+            header = [_header_name(t) for t in tokens]
+            skiprows = first[0] + 1
+            first = next(lines, None)
+            if first is not None:
+                delimiter = _delimiter(first[1])
+    lines.close()
+    ncols = len(_split(first[1], delimiter)) if first is not None else len(header or [])
+    ext = path.suffix.lower()
+    if first is None and header is None and columns is None:
+        names = ["x", "y", "z"]
+    else:
+        names = _resolve_names(columns, header, ncols, ext)
+    use = [i for i, n in enumerate(names) if n not in SKIP_NAMES]
+    kept = [names[i] for i in use]
+    if first is None:
+        table = np.empty((0, len(use)))
+    else:
+        table = np.loadtxt(
+            path,
+            delimiter=delimiter,
+            comments="#",
+            skiprows=skiprows,
+            usecols=use,
+            ndmin=2,
+            dtype=np.float64,
+            encoding="utf-8",
+        )
+    col = {n: table[:, j] for j, n in enumerate(kept)}
+    xyz = np.column_stack([col.pop("x"), col.pop("y"), col.pop("z")])
+    ints = _integer_columns()
+    attrs = {n: _narrow(n, np.ascontiguousarray(v), ints) for n, v in col.items()}
+    return PointCloud(xyz, attrs, meta={"columns": kept})
+
+
+def _format(arr: np.ndarray) -> str:
+    if arr.dtype.kind in "biu":
+        return "%d"
+    if arr.dtype.kind == "f":
+        return "%.7g" if arr.dtype.itemsize <= 4 else "%.15g"
+    raise LidarfxError(f"cannot write attribute values of dtype {arr.dtype} as text")
+
+
+def write(
+    cloud: PointCloud,
+    path: Path,
+    *,
+    ext: str = ".xyz",
+    progress: bool | None = None,
+    precision: int = 3,
+    delimiter: str | None = None,
+    header: bool = True,
+) -> None:
+    """Write a text point cloud: header line, ``x y z`` with ``precision`` decimals, attributes.
+
+    ``delimiter`` defaults to ``","`` for ``.csv`` and ``" "`` otherwise;
+    ``header=False`` omits the line of names (e.g. for tools expecting raw Oakland files).
+    """
+    if not isinstance(precision, int) or precision < 0:
+        raise LidarfxError(f"precision must be a non-negative integer, got {precision!r}")
+    delim = delimiter if delimiter is not None else ("," if ext == ".csv" else " ")
+    names = cloud.names
+    bad = [n for n in names if (delim.strip() or " ") in n or not n.strip() or n != n.strip() or " " in n]
+    if bad:
+        raise LidarfxError(f"attribute name(s) {bad} cannot be written to a text header")
+    fmt = [f"%.{precision}f"] * 3 + [_format(cloud[n]) for n in names]
+    line_fmt = delim.join(fmt) + "\n"
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+        if header:
+            fh.write(delim.join(["x", "y", "z", *names]) + "\n")
+        for start in range(0, len(cloud), _WRITE_BLOCK):
+            sl = slice(start, start + _WRITE_BLOCK)
+            cols = [cloud.xyz[sl, 0], cloud.xyz[sl, 1], cloud.xyz[sl, 2]] + [cloud[n][sl] for n in names]
+            fh.writelines(line_fmt % row for row in zip(*(c.tolist() for c in cols)))

@@ -1,0 +1,730 @@
+"""LAS / LAZ files (LAS 1.0-1.4, every point format) through laspy + lazrs.
+
+Reading
+    ``xyz`` = scaled coordinates (``X * scale + offset``, float64).  Every
+    standard dimension becomes an attribute under laspy's name and native dtype
+    (bit fields such as ``return_number`` or ``synthetic`` as ``uint8``), every
+    extra-bytes dimension too (scaled extra dimensions as float64, multi-element
+    ones split into ``name_0``, ``name_1``, ...).  ``cloud.header`` is the
+    ``laspy.LasHeader``: version, point format, scales, offsets, VLRs and EVLRs.
+    The raw integer X/Y/Z are *not* kept: ``round((x - offset) / scale)``
+    restores them exactly, and a single source of truth (``xyz``) cannot go
+    stale when a kernel moves points.
+
+Writing (rules in full in ``docs/io.md``)
+    With a source header: same version, point format, scales, offsets, VLRs and
+    EVLRs.  The point format is only widened inside its family when the cloud
+    gained ``gps_time`` / RGB / NIR (e.g. 1 -> 3 when colours were added); LAS
+    1.0 is written as 1.1 (same header layout; laspy cannot write 1.0).
+    Without one: LAS 1.4, point format 6 (7 with RGB, 8 with RGB + NIR), scale
+    0.001, offsets = per-axis minimum rounded down.
+    Attributes named like a standard dimension of the point format go there
+    (checked: out-of-range or fractional values raise); source extra dimensions
+    keep their type; any other attribute becomes a new extra-bytes dimension:
+    float -> float32, integer / bool -> int32 (int64 when the values need it).
+"""
+from __future__ import annotations
+
+import ctypes
+import re
+import struct
+from pathlib import Path
+from typing import Any, Iterator, NamedTuple
+
+import laspy
+import lazrs
+import numpy as np
+from laspy import ExtraBytesParams, LasHeader, PointFormat
+from laspy.point import dims as _dims
+from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
+
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+from . import progress_bar
+
+__all__ = [
+    "read",
+    "write",
+    "read_header",
+    "iter_chunks",
+    "crs_info",
+    "header_info",
+    "standard_dtypes",
+    "LasHeader",
+    "READ_ERRORS",
+]
+
+ACCEPTS_COLUMNS = False
+READ_ERRORS = (
+    laspy.errors.LaspyException,
+    lazrs.LazrsError,
+    ValueError,
+    EOFError,
+    struct.error,
+    OSError,
+)
+
+CHUNK_POINTS = 1 << 20
+"""Points per read/write chunk (about 30-150 MB of point records)."""
+_BLOCK_POINTS = 1 << 15
+"""Points (un)packed at a time inside a chunk: field-by-field strided access stays in the CPU cache."""
+
+DEFAULT_VERSION = "1.4"
+DEFAULT_SCALE = 0.001
+MAX_EXTRA_NAME_BYTES = 32
+_COORDS = ("X", "Y", "Z")
+_FAMILIES = ((0, 1, 2, 3, 4, 5), (6, 7, 8, 9, 10))
+_WIDENING_DIMS = ("gps_time", "red", "green", "blue", "nir")
+_DROPPED_VLR_USER_IDS = {"copc"}  # a COPC index would describe the wrong point order
+_INT32 = np.iinfo(np.int32)
+
+
+# ------------------------------------------------------------------ layout
+class _Field(NamedTuple):
+    """One cloud attribute <-> one (element of a) LAS dimension."""
+
+    attr: str
+    dim: _dims.DimensionInfo
+    element: int | None  # index into a multi-element extra dimension
+
+    @property
+    def scaled(self) -> bool:
+        return not self.dim.is_standard and self.dim.is_scaled
+
+    def scale_offset(self) -> tuple[float, float]:
+        i = self.element or 0
+        scales = np.atleast_1d(self.dim.scales if self.dim.scales is not None else 1.0)
+        offsets = np.atleast_1d(self.dim.offsets if self.dim.offsets is not None else 0.0)
+        return float(scales[min(i, scales.size - 1)]), float(offsets[min(i, offsets.size - 1)])
+
+    @property
+    def attr_dtype(self) -> np.dtype:
+        """dtype of the attribute array in the cloud."""
+        if self.scaled:
+            return np.dtype(np.float64)
+        if self.dim.kind == _dims.DimensionKind.BitField:
+            return np.dtype(np.uint8)
+        return self.dim.dtype.base
+
+
+def _fields_of_dim(dim: _dims.DimensionInfo) -> list[_Field]:
+    if dim.num_elements == 1:
+        return [_Field(dim.name, dim, None)]
+    return [_Field(f"{dim.name}_{i}", dim, i) for i in range(dim.num_elements)]
+
+
+def _fields(pf: PointFormat) -> list[_Field]:
+    """Every attribute of a point format, in record order (X, Y, Z excluded)."""
+    return [f for dim in pf.dimensions if dim.name not in _COORDS for f in _fields_of_dim(dim)]
+
+
+def standard_dtypes() -> dict[str, np.dtype]:
+    """Attribute dtype of every standard LAS dimension (all point formats; X/Y/Z excluded)."""
+    out: dict[str, np.dtype] = {}
+    for pf_id in (5, 10):  # together they hold every standard dimension
+        for f in _fields(PointFormat(pf_id)):
+            out.setdefault(f.attr, f.attr_dtype)
+    return out
+
+
+# ------------------------------------------------------------------ reading
+def _decode(
+    rec: laspy.PackedPointRecord,
+    header: LasHeader,
+    fields: list[_Field],
+    xyz: np.ndarray,
+    attrs: dict[str, np.ndarray],
+) -> None:
+    """Unpack a point record into preallocated ``xyz`` and attribute arrays."""
+    for b0 in range(0, len(rec), _BLOCK_POINTS):  # block-wise: strided reads stay in cache
+        sl = slice(b0, min(b0 + _BLOCK_POINTS, len(rec)))
+        block, raw = rec[sl], rec.array[sl]
+        for i, c in enumerate(_COORDS):
+            # Same float operations as laspy's ScaledArrayView: X * scale + offset.
+            np.multiply(raw[c], header.scales[i], out=xyz[sl, i])
+            xyz[sl, i] += header.offsets[i]
+        for f in fields:
+            out = attrs[f.attr][sl]
+            if f.dim.kind == _dims.DimensionKind.BitField:
+                out[:] = np.asarray(block[f.dim.name])
+                continue
+            src = raw[f.dim.name] if f.element is None else raw[f.dim.name][:, f.element]
+            if f.scaled:
+                scale, offset = f.scale_offset()
+                np.multiply(src, scale, out=out)
+                out += offset
+            else:
+                out[:] = src
+
+
+def _empty(n: int, fields: list[_Field]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    return np.empty((n, 3), dtype=np.float64), {f.attr: np.empty(n, dtype=f.attr_dtype) for f in fields}
+
+
+def read_header(path: Path) -> LasHeader:
+    """The header (with VLRs and EVLRs) of a LAS/LAZ file, without its points."""
+    with laspy.open(path) as reader:
+        return reader.header
+
+
+def iter_chunks(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[PointCloud]:
+    """Yield the file as consecutive clouds of at most ``chunk_points`` points.
+
+    Every chunk carries the file's header; a file without points yields one
+    empty chunk (so the attribute names are still known).
+    """
+    with laspy.open(path) as reader:
+        header = reader.header
+        fields = _fields(header.point_format)
+        yielded = False
+        for rec in reader.chunk_iterator(chunk_points):
+            xyz, attrs = _empty(len(rec), fields)
+            _decode(rec, header, fields, xyz, attrs)
+            yielded = True
+            yield PointCloud(xyz, attrs, header=header)
+        if not yielded:
+            yield PointCloud(*_empty(0, fields), header=header)
+
+
+def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
+    """Read a LAS/LAZ file into a :class:`PointCloud` (see the module docstring)."""
+    with laspy.open(path) as reader:
+        header = reader.header
+        n = int(header.point_count)
+        if not header.are_points_compressed:
+            expected = header.offset_to_point_data + n * header.point_format.size
+            if path.stat().st_size < expected:
+                raise LidarfxError(
+                    f"{path}: truncated: the header announces {n} points ({expected} bytes), "
+                    f"the file has {path.stat().st_size} bytes"
+                )
+        fields = _fields(header.point_format)
+        xyz, attrs = _empty(n, fields)
+        done = 0
+        with progress_bar(n, f"reading {path.name}", progress) as advance:
+            for rec in reader.chunk_iterator(CHUNK_POINTS):
+                m = len(rec)
+                if done + m > n:
+                    raise LidarfxError(f"{path}: more points than the header's {n}")
+                sl = slice(done, done + m)
+                _decode(rec, header, fields, xyz[sl], {k: v[sl] for k, v in attrs.items()})
+                done += m
+                advance(m)
+    if done != n:
+        raise LidarfxError(f"{path}: header announces {n} points but the file holds {done} (truncated?)")
+    meta = {"compressed": bool(header.are_points_compressed)}
+    return PointCloud(xyz, attrs, header=header, meta=meta)
+
+
+# ------------------------------------------------------------------ writing
+def _check_fits(values: np.ndarray, dtype: np.dtype, lo: float, hi: float, what: str) -> None:
+    """Raise unless every value of ``values`` is representable in ``dtype`` within [lo, hi]."""
+    kind = values.dtype.kind
+    if kind not in "biuf":
+        raise LidarfxError(f"{what}: cannot store values of dtype {values.dtype}")
+    if dtype.kind == "f" or values.size == 0:
+        return
+    if kind == "f":
+        if not np.isfinite(values).all():
+            raise LidarfxError(f"{what}: NaN or infinite values cannot be stored as {dtype}")
+        if not (values == np.trunc(values)).all():
+            raise LidarfxError(f"{what}: fractional values cannot be stored as {dtype}")
+    elif kind == "b":
+        return
+    elif np.can_cast(values.dtype, dtype) and (lo, hi) == (np.iinfo(dtype).min, np.iinfo(dtype).max):
+        return
+    vmin, vmax = values.min(), values.max()
+    if vmin < lo or vmax > hi:
+        raise LidarfxError(f"{what}: values {vmin}..{vmax} outside the storable range {lo}..{hi}")
+
+
+def _new_extra_dim(name: str, values: np.ndarray) -> ExtraBytesParams:
+    """Extra-bytes dimension for a new attribute: float -> float32, int/bool -> int32 (int64 if needed)."""
+    if not name.isascii() or not name.isprintable():
+        raise LidarfxError(f"attribute {name!r}: LAS extra-bytes names must be printable ASCII")
+    if len(name) > MAX_EXTRA_NAME_BYTES:
+        raise LidarfxError(
+            f"attribute {name!r} has {len(name)} characters;"
+            f" LAS extra-bytes names allow at most {MAX_EXTRA_NAME_BYTES}"
+        )
+    kind = values.dtype.kind
+    if kind == "f":
+        dtype = np.dtype(np.float32)
+    elif kind in "biu":
+        fits32 = kind == "b" or values.size == 0 or (_INT32.min <= values.min() and values.max() <= _INT32.max)
+        dtype = np.dtype(np.int32 if fits32 else np.int64)
+    else:
+        raise LidarfxError(f"attribute {name!r}: cannot store values of dtype {values.dtype} in LAS")
+    return ExtraBytesParams(name=name, type=dtype)
+
+
+def _choose_point_format(source: LasHeader | None, names: set[str], requested: int | None) -> int:
+    if requested is not None:
+        if requested not in _dims.supported_point_formats():
+            raise LidarfxError(f"unsupported LAS point format {requested}")
+        return int(requested)
+    if source is None:
+        if {"red", "green", "blue"} & names:
+            return 8 if "nir" in names else 7
+        return 6
+    pf_id = source.point_format.id
+    have = set(source.point_format.standard_dimension_names)
+    want = have | {d for d in _WIDENING_DIMS if d in names}
+    if want == have:
+        return pf_id
+    family = next(f for f in _FAMILIES if pf_id in f)
+    for cand in family:
+        if want <= set(PointFormat(cand).standard_dimension_names):
+            return cand
+    return pf_id  # e.g. NIR on a legacy format: becomes an extra dimension
+
+
+def _compatible_version(version: str, pf_id: int) -> str:
+    versions = sorted(v for v in _dims.supported_versions() if v >= version)
+    for v in versions:
+        if _dims.is_point_fmt_compatible_with_version(pf_id, v):
+            return v
+    raise LidarfxError(f"no LAS version >= {version} supports point format {pf_id}")
+
+
+def _fit_offsets(header: LasHeader, xyz: np.ndarray, keep: bool) -> None:
+    """Keep the header's offsets when the coordinates fit int32 with them, else floor(min)."""
+    if len(xyz) == 0:
+        return
+    if not np.isfinite(xyz).all():
+        raise LidarfxError("coordinates contain NaN or infinite values")
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    scales = np.asarray(header.scales, dtype=np.float64)
+
+    def fits(offsets: np.ndarray) -> bool:
+        return bool(
+            (np.rint((lo - offsets) / scales) >= _INT32.min).all()
+            and (np.rint((hi - offsets) / scales) <= _INT32.max).all()
+        )
+
+    if keep and fits(np.asarray(header.offsets, dtype=np.float64)):
+        return
+    offsets = np.floor(lo)
+    if not fits(offsets):
+        raise LidarfxError(
+            f"the extent {(hi - lo).tolist()} is too large for the LAS scale {scales.tolist()}"
+        )
+    header.offsets = offsets
+
+
+def _target_header(cloud: PointCloud, point_format: int | None, scale: Any) -> LasHeader:
+    """The header to write ``cloud`` with (a modified copy of its source header, or a new one)."""
+    source = cloud.header if isinstance(cloud.header, LasHeader) else None
+    names = set(cloud.names)
+    clash = names & {"X", "Y", "Z"}
+    if clash:
+        raise LidarfxError(f"attribute name(s) {sorted(clash)} are reserved for LAS raw coordinates")
+    pf_id = _choose_point_format(source, names, point_format)
+    standard = set(PointFormat(pf_id).standard_dimension_names) - set(_COORDS)
+
+    kept: list[_dims.DimensionInfo] = []
+    covered: set[str] = set()
+    if source is not None:
+        for dim in source.point_format.extra_dimensions:
+            attrs = [f.attr for f in _fields_of_dim(dim)]
+            if dim.name not in standard and all(a in names for a in attrs):
+                kept.append(dim)
+                covered.update(attrs)
+
+    reserved = set(PointFormat(pf_id).dtype().names) | {d.name for d in kept}
+    new_dims = []
+    for name in cloud.names:
+        if name in standard or name in covered:
+            continue
+        if name in reserved:
+            raise LidarfxError(f"attribute {name!r} clashes with a field of LAS point format {pf_id}")
+        new_dims.append(_new_extra_dim(name, cloud[name]))
+
+    if source is not None:
+        header = source.copy()
+        unchanged = pf_id == source.point_format.id and not new_dims and len(kept) == len(
+            list(source.point_format.extra_dimensions)
+        )
+        version = str(header.version)
+        if version == "1.0":
+            version = "1.1"
+        version = _compatible_version(version, pf_id)
+        if unchanged:
+            if version != str(header.version):
+                header.version = laspy.header.Version.from_str(version)
+        else:
+            header.set_version_and_point_format(
+                laspy.header.Version.from_str(version), _build_pf(pf_id, kept, new_dims)
+            )
+        for vlrs in (header.vlrs, header.evlrs or []):
+            # in place: assigning header.vlrs would rebuild the extra-bytes VLR
+            vlrs[:] = [v for v in vlrs if getattr(v, "user_id", "") not in _DROPPED_VLR_USER_IDS]
+    else:
+        header = LasHeader(version=DEFAULT_VERSION, point_format=_build_pf(pf_id, kept, new_dims))
+        header.scales = np.full(3, DEFAULT_SCALE)
+        from .. import __version__
+
+        header.generating_software = f"lidarfx {__version__}"
+
+    if scale is not None:
+        header.scales = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)).copy()
+    _fit_offsets(header, cloud.xyz, keep=source is not None)
+    return header
+
+
+def _build_pf(pf_id: int, kept: list[_dims.DimensionInfo], new_dims: list[ExtraBytesParams]) -> PointFormat:
+    pf = PointFormat(pf_id)
+    pf.dimensions.extend(kept)  # original DimensionInfo: type, description, scale, no_data
+    for params in new_dims:
+        pf.add_extra_dimension(params)
+    return pf
+
+
+class _Encoder(NamedTuple):
+    field: _Field
+    values: np.ndarray  # the validated source attribute
+
+    def stored(self, sl: slice) -> np.ndarray:
+        """Contiguous values of ``sl`` in the dtype they are stored with."""
+        f, values = self.field, self.values[sl]
+        if f.dim.kind == _dims.DimensionKind.BitField:
+            return values.astype(np.uint8, copy=False)
+        if f.scaled:
+            scale, offset = f.scale_offset()
+            values = np.rint((values - offset) / scale)
+        return values.astype(f.dim.dtype.base, copy=False)
+
+
+def _encoders(cloud: PointCloud, pf: PointFormat) -> list[_Encoder]:
+    """Validate every attribute against its target LAS field (one pass, before writing)."""
+    out = []
+    for f in _fields(pf):
+        if f.attr not in cloud:
+            continue  # standard dimension the cloud does not have: stays 0
+        values = cloud[f.attr]
+        what = f"attribute {f.attr!r} -> LAS {f.dim.name}"
+        if f.scaled:  # check the quantised extremes (NaN included) against the stored type
+            scale, offset = f.scale_offset()
+            stored = f.dim.dtype.base
+            if values.size and stored.kind in "iu":
+                ends = np.rint((np.array([values.min(), values.max()], dtype=np.float64) - offset) / scale)
+                info = np.iinfo(stored)
+                _check_fits(ends, stored, info.min, info.max, f"{what} (scaled)")
+        else:
+            target = np.dtype(np.uint8) if f.dim.kind == _dims.DimensionKind.BitField else f.dim.dtype.base
+            lo, hi = (f.dim.min, f.dim.max) if target.kind in "iu" else (0, 0)
+            _check_fits(values, target, lo, hi, what)
+        out.append(_Encoder(f, values))
+    return out
+
+
+def _encode(
+    rec: laspy.PackedPointRecord,
+    header: LasHeader,
+    xyz: np.ndarray,
+    encoders: list[_Encoder],
+    start: int,
+    stats: "_ExtraBytesStats",
+) -> None:
+    """Pack cloud points ``start : start + len(rec)`` into ``rec``."""
+    raw = rec.array
+    for b0 in range(0, len(rec), _BLOCK_POINTS):
+        b1 = min(b0 + _BLOCK_POINTS, len(rec))
+        out, sl = raw[b0:b1], slice(start + b0, start + b1)
+        for i, c in enumerate(_COORDS):
+            out[c] = np.rint((xyz[sl, i] - header.offsets[i]) / header.scales[i])
+        for enc in encoders:
+            f, stored = enc.field, enc.stored(sl)
+            if f.dim.kind == _dims.DimensionKind.BitField:
+                rec[b0:b1][f.dim.name] = stored
+            elif f.element is None:
+                out[f.dim.name] = stored
+            else:
+                out[f.dim.name][:, f.element] = stored
+            if not f.dim.is_standard:
+                stats.update(f, stored)
+
+
+def _descriptor_kind(desc) -> type:
+    """numpy type of the min/max/no_data slots of an extra-bytes descriptor (LAS data types 1-10, 11-30)."""
+    base = (desc.data_type - 1) % 10  # 0 uchar, 1 char, ... 7 int64, 8 float, 9 double
+    return np.float64 if base >= 8 else (np.uint64, np.int64)[base % 2]
+
+
+class _ExtraBytesStats:
+    """Min / max of the stored extra-bytes values, for the extra-bytes VLR.
+
+    ``laspy.LasWriter`` resets the min/max bytes of every descriptor and regrows
+    them from the packed records: slowly (strided), wrongly for single-element
+    fields with a ``no_data`` value, and even in descriptors whose options do
+    not flag min/max.  We switch that off (:meth:`detach`), track min/max from
+    the contiguous values being packed, and patch the writer's header before it
+    is written (:meth:`apply`), so an unchanged cloud gives a bit-identical
+    extra-bytes VLR.
+    """
+
+    _MINMAX = 0b110  # ExtraBytesStruct MIN_BIT_MASK | MAX_BIT_MASK
+
+    def __init__(self, header: LasHeader) -> None:
+        found = header.vlrs.get("ExtraBytesVlr")
+        self.template = found[0] if found else None
+        descs = self.template.extra_bytes_structs if self.template else []
+        self.by_name = {d.format_name(): d for d in descs}
+        self.lo: dict[str, list] = {}
+        self.hi: dict[str, list] = {}
+
+    def detach(self, written: LasHeader) -> None:
+        """Stop laspy from tracking min/max itself in the writer's header."""
+        for out in self._written(written):
+            out.options &= ~self._MINMAX
+
+    def update(self, field: _Field, stored: np.ndarray) -> None:
+        desc = self.by_name.get(field.dim.name)
+        if desc is None or desc.data_type == 0 or not desc.options & self._MINMAX or stored.size == 0:
+            return
+        i = field.element or 0
+        no_data = desc.no_data
+        if no_data is not None:
+            stored = stored[stored != no_data[i]]
+            if stored.size == 0:
+                return
+        k = field.dim.num_elements
+        lo = self.lo.setdefault(field.dim.name, [None] * k)
+        hi = self.hi.setdefault(field.dim.name, [None] * k)
+        vmin, vmax = stored.min().item(), stored.max().item()
+        lo[i] = vmin if lo[i] is None else min(lo[i], vmin)
+        hi[i] = vmax if hi[i] is None else max(hi[i], vmax)
+
+    def _written(self, written: LasHeader) -> list:
+        found = written.vlrs.get("ExtraBytesVlr")
+        return list(found[0].extra_bytes_structs) if found and self.template else []
+
+    def apply(self, written: LasHeader) -> None:
+        """Restore the template's descriptors, with min/max of the data written."""
+        descs = self.template.extra_bytes_structs if self.template else []
+        for out, desc in zip(self._written(written), descs):
+            out.options = desc.options
+            ctypes.memmove(out._min, desc._min, ctypes.sizeof(out._min))
+            ctypes.memmove(out._max, desc._max, ctypes.sizeof(out._max))
+            name = desc.format_name()
+            for slot, values, relevant in (
+                (out._min, self.lo.get(name, ()), desc.min_is_relevant()),
+                (out._max, self.hi.get(name, ()), desc.max_is_relevant()),
+            ):
+                view = np.frombuffer(slot, dtype=_descriptor_kind(desc))
+                for i, v in enumerate(values):
+                    if relevant and v is not None:
+                        view[i] = v
+
+
+def write(
+    cloud: PointCloud,
+    path: Path,
+    *,
+    ext: str = ".las",
+    progress: bool | None = None,
+    point_format: int | None = None,
+    scale: float | tuple[float, float, float] | None = None,
+) -> None:
+    """Write ``cloud`` as LAS (``ext == ".las"``) or LAZ (``".laz"``, lazrs).
+
+    ``point_format`` forces a point format (extra dimensions carried over);
+    ``scale`` sets the coordinate scale(s) (offsets are kept when the
+    coordinates still fit, else recomputed).  See the module docstring.
+    """
+    header = _target_header(cloud, point_format, scale)
+    pf = header.point_format
+    encoders = _encoders(cloud, pf)
+    n = len(cloud)
+    stats = _ExtraBytesStats(header)
+    buf = np.zeros(min(n, CHUNK_POINTS), dtype=pf.dtype())
+    compress = ext == ".laz"
+    with open(path, "wb") as fh, laspy.LasWriter(fh, header, do_compress=compress, closefd=False) as writer:
+        stats.detach(writer.header)
+        with progress_bar(n, f"writing {Path(path).name}", progress) as advance:
+            for start in range(0, n, CHUNK_POINTS):
+                sl = slice(start, min(start + CHUNK_POINTS, n))
+                rec = laspy.PackedPointRecord(buf[: sl.stop - sl.start], pf)
+                _encode(rec, header, cloud.xyz, encoders, start, stats)
+                writer.write_points(rec)
+                advance(sl.stop - sl.start)
+        stats.apply(writer.header)
+        if header.version.minor >= 4 and header.evlrs:
+            writer.write_evlrs(header.evlrs)
+
+
+# ---------------------------------------------------------------- summaries
+_GEOTIFF_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048), 9003: ("US survey foot", 1200 / 3937)}
+_PROJECTED_CS_KEY, _GEOGRAPHIC_CS_KEY, _PROJ_LINEAR_UNITS_KEY = 3072, 2048, 3076
+_MODEL_TYPE_KEY, _MODEL_GEOGRAPHIC = 1024, 2
+_WKT_GEOGRAPHIC = ("GEOGCS", "GEOGCRS", "GEODCRS", "GEOCCS")
+_USER_DEFINED = 32767
+
+
+class _WktNode(NamedTuple):
+    keyword: str
+    args: list  # str (quoted), float/str (bare), or _WktNode
+
+
+def _parse_wkt(text: str) -> _WktNode | None:
+    """Parse WKT1/WKT2 into a tree of keyword nodes (enough to find units and IDs)."""
+    pos = 0
+
+    def skip() -> None:
+        nonlocal pos
+        while pos < len(text) and text[pos].isspace():
+            pos += 1
+
+    def node() -> _WktNode:
+        nonlocal pos
+        m = re.compile(r"[A-Za-z_][A-Za-z0-9_]*").match(text, pos)
+        if not m:
+            raise ValueError(f"WKT: keyword expected at {pos}")
+        pos = m.end()
+        skip()
+        if pos >= len(text) or text[pos] not in "[(":
+            raise ValueError("WKT: '[' expected")
+        close = "]" if text[pos] == "[" else ")"
+        pos += 1
+        args: list = []
+        while True:
+            skip()
+            ch = text[pos]
+            if ch == '"':
+                end = pos + 1
+                while True:
+                    end = text.index('"', end)
+                    if text.startswith('""', end):
+                        end += 2
+                        continue
+                    break
+                args.append(text[pos + 1 : end].replace('""', '"'))
+                pos = end + 1
+            elif ch.isalpha() and re.compile(r"[A-Za-z_][A-Za-z0-9_]*\s*[\[(]").match(text, pos):
+                args.append(node())
+            else:
+                m2 = re.compile(r"[^,\])]+").match(text, pos)
+                token = m2.group().strip() if m2 else ""
+                pos = m2.end() if m2 else pos
+                try:
+                    args.append(float(token))
+                except ValueError:
+                    args.append(token)
+            skip()
+            if text[pos] == ",":
+                pos += 1
+            elif text[pos] == close:
+                pos += 1
+                return _WktNode(m.group().upper(), args)
+            else:
+                raise ValueError(f"WKT: unexpected {text[pos]!r}")
+
+    try:
+        return node()
+    except (ValueError, IndexError):
+        return None
+
+
+def _wkt_epsg(node: _WktNode) -> int | None:
+    for arg in node.args:
+        if isinstance(arg, _WktNode) and arg.keyword in ("AUTHORITY", "ID") and len(arg.args) >= 2:
+            if str(arg.args[0]).upper() == "EPSG":
+                try:
+                    return int(float(arg.args[1]))
+                except ValueError:
+                    return None
+    return None
+
+
+def _wkt_linear_unit(node: _WktNode) -> tuple[str, float] | None:
+    """(name, metres per unit) of the horizontal axes: WKT1 ``UNIT`` under the root,
+    WKT2 ``LENGTHUNIT`` under the root or its ``AXIS`` nodes; ``None`` for geographic CRSs."""
+    if node.keyword in ("COMPD_CS", "COMPOUNDCRS"):
+        horizontal = next((a for a in node.args if isinstance(a, _WktNode)), None)
+        return _wkt_linear_unit(horizontal) if horizontal else None
+    if node.keyword in _WKT_GEOGRAPHIC:
+        return None
+    axes = [a for a in node.args if isinstance(a, _WktNode) and a.keyword == "AXIS"]
+    for parent in [node, *axes]:
+        for a in parent.args:
+            if isinstance(a, _WktNode) and a.keyword in ("UNIT", "LENGTHUNIT") and len(a.args) >= 2:
+                if isinstance(a.args[1], float):
+                    return str(a.args[0]), a.args[1]
+    return None
+
+
+def _all_vlrs(header: LasHeader) -> list:
+    return list(header.vlrs) + list(header.evlrs or [])
+
+
+def crs_info(header: LasHeader) -> dict[str, Any] | None:
+    """CRS of a LAS header: ``{wkt, epsg, linear_unit, unit_to_metre, geographic, sources}`` or ``None``.
+
+    WKT (OGC WKT VLR/EVLR) wins over GeoTIFF keys.  ``epsg`` is the root
+    authority code of the WKT, else the GeoTIFF projected / geographic CS key
+    (``None`` when user-defined).  ``unit_to_metre`` is the horizontal unit
+    (``None`` for geographic coordinates or when unknown); ``geographic`` is
+    true for longitude/latitude coordinates; ``sources`` lists the CRS records
+    found (``"wkt"``, ``"geotiff"``).
+    """
+    vlrs = _all_vlrs(header)
+    wkts = [v.string.strip("\x00 \r\n") for v in vlrs if isinstance(v, WktCoordinateSystemVlr)]
+    wkt = next((w for w in wkts if w), None)
+    keys: dict[int, int] = {}
+    for v in vlrs:
+        if isinstance(v, GeoKeyDirectoryVlr):
+            direct = (k for k in v.geo_keys if k.tiff_tag_location == 0 and k.id)  # value stored in the key
+            keys.update({int(k.id): int(k.value_offset) for k in direct})
+    if wkt is None and not keys:
+        return None
+    epsg, unit = None, None
+    tree = _parse_wkt(wkt) if wkt else None
+    if tree is not None:
+        epsg, unit = _wkt_epsg(tree), _wkt_linear_unit(tree)
+        geographic = tree.keyword in _WKT_GEOGRAPHIC
+    else:
+        geographic = keys.get(_MODEL_TYPE_KEY) == _MODEL_GEOGRAPHIC
+    if epsg is None:
+        for key in (_PROJECTED_CS_KEY, _GEOGRAPHIC_CS_KEY):
+            code = keys.get(key)
+            if code and code != _USER_DEFINED:
+                epsg = code
+                break
+    if unit is None and tree is None:
+        unit = _GEOTIFF_UNITS.get(keys.get(_PROJ_LINEAR_UNITS_KEY, -1))
+    return {
+        "wkt": wkt,
+        "epsg": epsg,
+        "linear_unit": unit[0] if unit else None,
+        "unit_to_metre": unit[1] if unit else None,
+        "geographic": geographic,
+        "sources": [k for k, found in (("wkt", wkt), ("geotiff", keys)) if found],
+    }
+
+
+def header_info(header: LasHeader) -> dict[str, Any]:
+    """LAS header facts for :func:`lidarfx.io.info` (JSON-serialisable)."""
+    pf = header.point_format
+    return {
+        "version": str(header.version),
+        "point_format": int(pf.id),
+        "compressed": bool(header.are_points_compressed),
+        "scales": [float(s) for s in header.scales],
+        "offsets": [float(o) for o in header.offsets],
+        "header_point_count": int(header.point_count),
+        "extra_dims": [
+            {"name": d.name, "type": d.type_str() or "bits", "description": d.description}
+            for d in pf.extra_dimensions
+        ],
+        "vlrs": [
+            {"user_id": v.user_id, "record_id": int(v.record_id), "description": v.description}
+            for v in header.vlrs
+        ],
+        "evlrs": [
+            {"user_id": v.user_id, "record_id": int(v.record_id), "description": v.description}
+            for v in (header.evlrs or [])
+        ],
+        "generating_software": str(header.generating_software).strip("\x00 "),
+        "system_identifier": str(header.system_identifier).strip("\x00 "),
+        "creation_date": header.creation_date.isoformat() if header.creation_date else None,
+    }

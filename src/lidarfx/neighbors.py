@@ -1,0 +1,460 @@
+"""One spatial index for every neighbourhood kind: a sorted column grid.
+
+Points (already in local coordinates) are sorted by their 2-D grid column
+``(ix, iy)`` and, inside a column, by z.  A column is therefore one contiguous
+run of the sorted arrays, and the part of a column inside a z window is found
+with two binary searches.  This answers
+
+* spheres of radius r (3-D): the (2m+1)² columns around the query, z window ±r;
+* vertical cylinders (2-D distance; unbounded, or ±h with a height limit);
+* k nearest neighbours (rings of columns, two-pointer walk from the query's z);
+* kNN capped by a radius;
+
+and every radius of a multi-scale run, because one scan of the largest radius
+visits every smaller neighbourhood too.  Kernels walk neighbours in place
+(``for j in range(lo, hi)``): no per-point lists are ever built.
+
+Only numpy arrays go into the numba kernels.  The Python class
+:class:`NeighborIndex` owns them and offers convenience queries
+(:meth:`NeighborIndex.query_radius`, :meth:`NeighborIndex.knn`, ...).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from .errors import LidarfxError
+
+__all__ = ["NeighborIndex", "Grid", "default_cell_for_knn"]
+
+
+class Grid(NamedTuple):
+    """The numba-side view of the index (a tuple of arrays and scalars)."""
+
+    pts: np.ndarray  # (n, 3) float64, local coordinates, sorted by (column, z)
+    cstart: np.ndarray  # (ncols,) int64 first sorted index of each non-empty column
+    cend: np.ndarray  # (ncols,) int64 one past the last
+    ckey: np.ndarray  # (ncols,) int64 column key ix*ny+iy, ascending
+    table: np.ndarray  # dense key -> column number (-1 empty), or empty when sparse
+    nx: int
+    ny: int
+    cell: float
+
+
+# ----------------------------------------------------------------------------
+# numba primitives shared by every kernel that walks neighbours
+# ----------------------------------------------------------------------------
+@nb.njit(cache=True, inline="always")
+def column_of(ckey, table, ny, ix, iy):
+    """Column number of grid cell (ix, iy), or -1 when empty (bounds checked by caller)."""
+    key = ix * ny + iy
+    if table.shape[0] > 0:
+        return table[key]
+    lo = 0
+    hi = ckey.shape[0]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if ckey[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < ckey.shape[0] and ckey[lo] == key:
+        return lo
+    return -1
+
+
+@nb.njit(cache=True, inline="always")
+def lower_bound_z(pts, lo, hi, zval):
+    """First sorted index in [lo, hi) whose z >= zval."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if pts[mid, 2] < zval:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@nb.njit(cache=True)
+def column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, radius, zhalf, lo_out, hi_out):
+    """Fill ``lo_out/hi_out`` with the sorted-index runs that can hold neighbours.
+
+    Every point within 2-D distance ``radius`` of (qx, qy) and with
+    ``|z - qz| <= zhalf`` lies in one of the returned runs (``zhalf = inf``
+    for an unbounded cylinder).  Columns entirely farther than ``radius`` are
+    skipped.  Returns the number of runs; the buffers need (2m+1)² entries,
+    m = ceil(radius / cell).
+    """
+    m = int(math.ceil(radius / cell))
+    cx = int(math.floor(qx / cell))
+    cy = int(math.floor(qy / cell))
+    r2 = radius * radius
+    nr = 0
+    for gx in range(cx - m, cx + m + 1):
+        if gx < 0 or gx >= nx:
+            continue
+        x0 = gx * cell
+        ddx = 0.0
+        if qx < x0:
+            ddx = x0 - qx
+        elif qx > x0 + cell:
+            ddx = qx - x0 - cell
+        if ddx * ddx > r2:
+            continue
+        for gy in range(cy - m, cy + m + 1):
+            if gy < 0 or gy >= ny:
+                continue
+            y0 = gy * cell
+            ddy = 0.0
+            if qy < y0:
+                ddy = y0 - qy
+            elif qy > y0 + cell:
+                ddy = qy - y0 - cell
+            if ddx * ddx + ddy * ddy > r2:
+                continue
+            c = column_of(ckey, table, ny, gx, gy)
+            if c < 0:
+                continue
+            a = cstart[c]
+            b = cend[c]
+            if zhalf < np.inf:
+                a = lower_bound_z(pts, a, b, qz - zhalf)
+                b = lower_bound_z(pts, a, b, np.nextafter(qz + zhalf, np.inf))
+            if a < b:
+                if nr > 0 and hi_out[nr - 1] == a:
+                    hi_out[nr - 1] = b  # adjacent in memory: one longer run
+                else:
+                    lo_out[nr] = a
+                    hi_out[nr] = b
+                    nr += 1
+    return nr
+
+
+def ring_buffer_size(radius_max: float, cell: float) -> int:
+    m = int(math.ceil(radius_max / cell))
+    return (2 * m + 1) ** 2
+
+
+# ----------------------------------------------------------------------------
+# kernels
+# ----------------------------------------------------------------------------
+@nb.njit(cache=True, parallel=True)
+def _count_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf):
+    m = q.shape[0]
+    out = np.zeros(m, np.int64)
+    nchunk = (m + 1023) // 1024
+    for ch in nb.prange(nchunk):
+        lo = np.empty(nbuf, np.int64)
+        hi = np.empty(nbuf, np.int64)
+        for i in range(ch * 1024, min(m, ch * 1024 + 1024)):
+            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+            r = radius[i] if radius.shape[0] > 1 else radius[0]
+            r2 = r * r
+            zh = zhalf if cylinder else r
+            nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
+            cnt = 0
+            for k in range(nr):
+                for j in range(lo[k], hi[k]):
+                    dx = pts[j, 0] - qx
+                    dy = pts[j, 1] - qy
+                    d2 = dx * dx + dy * dy
+                    if not cylinder:
+                        dz = pts[j, 2] - qz
+                        d2 += dz * dz
+                    if d2 <= r2:
+                        cnt += 1
+            out[i] = cnt
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _collect_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf, offsets, out_idx, out_d):
+    """Write neighbour indices (sorted order) and distances into CSR arrays."""
+    m = q.shape[0]
+    nchunk = (m + 1023) // 1024
+    for ch in nb.prange(nchunk):
+        lo = np.empty(nbuf, np.int64)
+        hi = np.empty(nbuf, np.int64)
+        for i in range(ch * 1024, min(m, ch * 1024 + 1024)):
+            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+            r = radius[i] if radius.shape[0] > 1 else radius[0]
+            r2 = r * r
+            zh = zhalf if cylinder else r
+            nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
+            w = offsets[i]
+            for k in range(nr):
+                for j in range(lo[k], hi[k]):
+                    dx = pts[j, 0] - qx
+                    dy = pts[j, 1] - qy
+                    d2 = dx * dx + dy * dy
+                    if not cylinder:
+                        dz = pts[j, 2] - qz
+                        d2 += dz * dz
+                    if d2 <= r2:
+                        out_idx[w] = j
+                        out_d[w] = math.sqrt(d2)
+                        w += 1
+
+
+@nb.njit(cache=True, inline="always")
+def _heap_push(hd, hi_, size, k, d2, j):
+    """Max-heap of the k best (smallest d2).  Returns the new size."""
+    if size < k:
+        pos = size
+        size += 1
+    elif d2 < hd[0]:
+        # replace root and sift down
+        pos = 0
+        while True:
+            c = 2 * pos + 1
+            if c >= size:
+                break
+            if c + 1 < size and hd[c + 1] > hd[c]:
+                c += 1
+            if hd[c] <= d2:
+                break
+            hd[pos] = hd[c]
+            hi_[pos] = hi_[c]
+            pos = c
+        hd[pos] = d2
+        hi_[pos] = j
+        return size
+    else:
+        return size
+    # sift up for an insertion at pos
+    while pos > 0:
+        p = (pos - 1) >> 1
+        if hd[p] >= d2:
+            break
+        hd[pos] = hd[p]
+        hi_[pos] = hi_[p]
+        pos = p
+    hd[pos] = d2
+    hi_[pos] = j
+    return size
+
+
+@nb.njit(cache=True, parallel=True)
+def _knn_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, k, rmax, out_idx, out_d):
+    """k nearest neighbours (3-D) by rings of columns; ``rmax`` caps the search (inf = none).
+
+    Rows with fewer than k neighbours inside ``rmax`` are padded with -1 / inf.
+    """
+    m = q.shape[0]
+    nchunk = (m + 255) // 256
+    rmax2 = rmax * rmax
+    for ch in nb.prange(nchunk):
+        hd = np.empty(k, np.float64)
+        hj = np.empty(k, np.int64)
+        for i in range(ch * 256, min(m, ch * 256 + 256)):
+            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+            cx = int(math.floor(qx / cell))
+            cy = int(math.floor(qy / cell))
+            # distance from the query to the border of its own cell
+            inner = min(qx - cx * cell, (cx + 1) * cell - qx, qy - cy * cell, (cy + 1) * cell - qy)
+            if inner < 0.0:
+                inner = 0.0
+            size = 0
+            ring = 0
+            maxring = max(nx, ny) + abs(cx) + abs(cy) + 1
+            while True:
+                for gx in range(cx - ring, cx + ring + 1):
+                    if gx < 0 or gx >= nx:
+                        continue
+                    edge_x = gx == cx - ring or gx == cx + ring
+                    step = 1 if edge_x else 2 * ring
+                    gy = cy - ring
+                    while gy <= cy + ring:
+                        if gy >= 0 and gy < ny:
+                            c = column_of(ckey, table, ny, gx, gy)
+                            if c >= 0:
+                                a = cstart[c]
+                                b = cend[c]
+                                # walk up and down from the query height
+                                s = lower_bound_z(pts, a, b, qz)
+                                up = s
+                                dn = s - 1
+                                while up < b or dn >= a:
+                                    worst = hd[0] if size == k else rmax2
+                                    if worst > rmax2:
+                                        worst = rmax2
+                                    if up < b:
+                                        dz = pts[up, 2] - qz
+                                        if dz * dz > worst:
+                                            up = b
+                                        else:
+                                            dx = pts[up, 0] - qx
+                                            dy = pts[up, 1] - qy
+                                            d2 = dx * dx + dy * dy + dz * dz
+                                            if d2 <= rmax2:
+                                                size = _heap_push(hd, hj, size, k, d2, up)
+                                            up += 1
+                                    if dn >= a:
+                                        dz = qz - pts[dn, 2]
+                                        worst = hd[0] if size == k else rmax2
+                                        if worst > rmax2:
+                                            worst = rmax2
+                                        if dz * dz > worst:
+                                            dn = a - 1
+                                        else:
+                                            dx = pts[dn, 0] - qx
+                                            dy = pts[dn, 1] - qy
+                                            d2 = dx * dx + dy * dy + dz * dz
+                                            if d2 <= rmax2:
+                                                size = _heap_push(hd, hj, size, k, d2, dn)
+                                            dn -= 1
+                        gy += step
+                covered = ring * cell + inner
+                ring += 1
+                if size == k and hd[0] <= covered * covered:
+                    break
+                if covered >= rmax:
+                    break
+                if ring > maxring:
+                    break
+            # heap -> sorted ascending
+            order = np.argsort(hd[:size])
+            for t in range(size):
+                out_idx[i, t] = hj[order[t]]
+                out_d[i, t] = math.sqrt(hd[order[t]])
+            for t in range(size, k):
+                out_idx[i, t] = -1
+                out_d[i, t] = np.inf
+
+
+# ----------------------------------------------------------------------------
+# Python side
+# ----------------------------------------------------------------------------
+def _build(pts_local: np.ndarray, cell: float):
+    n = pts_local.shape[0]
+    ix = np.floor(pts_local[:, 0] / cell).astype(np.int64)
+    iy = np.floor(pts_local[:, 1] / cell).astype(np.int64)
+    nx = int(ix.max()) + 1 if n else 1
+    ny = int(iy.max()) + 1 if n else 1
+    key = ix * ny + iy
+    # sort by z, then stably by column: columns contiguous, z ascending inside
+    oz = np.argsort(pts_local[:, 2], kind="stable")
+    order = oz[np.argsort(key[oz], kind="stable")]
+    skey = key[order]
+    if n:
+        brk = np.flatnonzero(np.diff(skey)) + 1
+        cstart = np.concatenate(([0], brk)).astype(np.int64)
+        cend = np.concatenate((brk, [n])).astype(np.int64)
+        ckey = skey[cstart]
+    else:
+        cstart = cend = ckey = np.zeros(0, np.int64)
+    ncells = nx * ny
+    if ncells <= 4 * n + 4096:
+        table = np.full(ncells, -1, np.int64)
+        table[ckey] = np.arange(ckey.shape[0], dtype=np.int64)
+    else:
+        table = np.zeros(0, np.int64)
+    return order, cstart, cend, ckey, table, nx, ny
+
+
+def default_cell_for_knn(pts_local: np.ndarray, k: int) -> float:
+    """A column size holding about k points per column on average (2-D density)."""
+    n = max(pts_local.shape[0], 1)
+    ext = np.ptp(pts_local[:, :2], axis=0) if n > 1 else np.ones(2)
+    area = max(float(ext[0]) * float(ext[1]), 1e-6)
+    return max(math.sqrt(area * k / n), 1e-3)
+
+
+class NeighborIndex:
+    """Sorted column grid over a point cloud (local coordinates).
+
+    Parameters
+    ----------
+    xyz:
+        (n, 3) coordinates.  They are made local by subtracting ``origin``
+        (default: the per-axis minimum), so UTM-sized coordinates give the
+        same neighbourhoods as the cloud shifted to 0.
+    cell:
+        Column size in metres; the largest query radius is the natural choice
+        (a sphere then scans 3×3 columns).
+    origin:
+        Local origin; pass the same origin to compare indexes of shifted clouds.
+    """
+
+    def __init__(self, xyz: np.ndarray, cell: float, origin: np.ndarray | None = None) -> None:
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise LidarfxError("xyz must have shape (n, 3)")
+        if not np.isfinite(xyz).all():
+            raise LidarfxError("coordinates contain NaN or infinite values")
+        if not (cell > 0 and math.isfinite(cell)):
+            raise LidarfxError(f"cell size must be positive, got {cell}")
+        self.origin = xyz.min(axis=0) if (origin is None and len(xyz)) else np.asarray(
+            origin if origin is not None else np.zeros(3), dtype=np.float64
+        )
+        local = xyz - self.origin
+        if len(local) and local.min() < 0:
+            raise LidarfxError("origin must not exceed the minimum coordinate")
+        self.cell = float(cell)
+        order, cstart, cend, ckey, table, nx, ny = _build(local, self.cell)
+        self.order = order  # sorted position -> original index
+        self.grid = Grid(np.ascontiguousarray(local[order]), cstart, cend, ckey, table, nx, ny, self.cell)
+
+    def __len__(self) -> int:
+        return self.grid.pts.shape[0]
+
+    def to_local(self, q: np.ndarray) -> np.ndarray:
+        """Query coordinates in this index's local frame (C-contiguous float64)."""
+        return np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, 3) - self.origin)
+
+    def _radius_array(self, radius, m: int) -> np.ndarray:
+        r = np.atleast_1d(np.asarray(radius, dtype=np.float64))
+        if r.shape[0] not in (1, m):
+            raise LidarfxError("radius must be a scalar or one value per query point")
+        if (r < 0).any() or not np.isfinite(r).all():
+            raise LidarfxError("radius must be finite and >= 0")
+        return np.ascontiguousarray(r)
+
+    def count(self, q: np.ndarray, radius, cylinder: bool = False, height: float | None = None) -> np.ndarray:
+        """Number of points within ``radius`` of each query (sphere, or vertical cylinder)."""
+        ql = self.to_local(q)
+        r = self._radius_array(radius, len(ql))
+        g = self.grid
+        zhalf = np.inf if height is None else float(height)
+        return _count_kernel(*g, ql, r, cylinder, zhalf, ring_buffer_size(float(r.max(initial=0)), g.cell))
+
+    def query_radius(self, q: np.ndarray, radius, cylinder: bool = False, height: float | None = None):
+        """Neighbours within ``radius`` as CSR: ``(offsets, indices, distances)``.
+
+        ``indices[offsets[i]:offsets[i+1]]`` are original point indices of query
+        i's neighbours (unordered).  Materialises the lists: meant for tests,
+        small queries and tools; feature kernels walk neighbours in place.
+        """
+        ql = self.to_local(q)
+        r = self._radius_array(radius, len(ql))
+        g = self.grid
+        zhalf = np.inf if height is None else float(height)
+        nbuf = ring_buffer_size(float(r.max(initial=0)), g.cell)
+        counts = _count_kernel(*g, ql, r, cylinder, zhalf, nbuf)
+        offsets = np.zeros(len(ql) + 1, np.int64)
+        np.cumsum(counts, out=offsets[1:])
+        idx = np.empty(offsets[-1], np.int64)
+        dist = np.empty(offsets[-1], np.float64)
+        _collect_kernel(*g, ql, r, cylinder, zhalf, nbuf, offsets, idx, dist)
+        return offsets, self.order[idx], dist
+
+    def knn(self, q: np.ndarray, k: int, max_radius: float | None = None):
+        """k nearest neighbours (3-D): ``(indices, distances)`` of shape (m, k), ascending.
+
+        With ``max_radius`` only neighbours within it are returned; missing
+        entries are -1 / inf.  The query point itself is included when it is
+        part of the indexed cloud (distance 0).
+        """
+        if k < 1:
+            raise LidarfxError("k must be >= 1")
+        ql = self.to_local(q)
+        g = self.grid
+        idx = np.empty((len(ql), k), np.int64)
+        dist = np.empty((len(ql), k), np.float64)
+        rmax = np.inf if max_radius is None else float(max_radius)
+        _knn_kernel(*g, ql, int(k), rmax, idx, dist)
+        out = np.where(idx >= 0, self.order[np.maximum(idx, 0)], -1)
+        return out, dist

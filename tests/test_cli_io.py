@@ -1,0 +1,179 @@
+"""``lidarfx info`` and ``lidarfx convert`` (in-process and as a subprocess)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from lidarfx.cli import main
+from lidarfx.io import read
+
+REAL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "real").resolve()
+SRC = Path(__file__).parents[1] / "src"
+
+REAL_LAS = [
+    "12AN2_20.laz",
+    "AHN3.laz",
+    "MixedConifer.laz",
+    "TO_core_last_zoom.laz",
+    "Topography.laz",
+    "autzen_trim.laz",
+    "crop_1.laz",
+    "file_with_both_wkt_and_geotiff_vlrs.las",
+    "fusa.laz",
+    "lake.laz",
+    "lone-star.laz",
+    "plane.laz",
+    "pont.laz",
+    "samp11-utm.laz",
+    "samp21-utm.laz",
+    "samp23-utm.laz",
+    "samp31-utm.laz",
+    "samp41-utm.laz",
+    "samp51-utm.laz",
+    "samp53-utm.laz",
+    "samp61-utm.laz",
+    "sample_c.las",
+    "test_data_77050_627755_LA93_IGN69.laz",
+    "test_data_77055_627755_LA93_IGN69.laz",
+    "test_data_77060_627755_LA93_IGN69.laz",
+    "warsaw_small.las",
+]
+
+
+def real(name: str) -> Path:
+    path = REAL / name
+    if not path.exists():
+        pytest.skip(f"real data not found: {path}")
+    return path
+
+
+def run_json(capsys, *argv: str):
+    assert main(["info", "--json", *argv]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("name", REAL_LAS)
+def test_info_json_matches_laspy(capsys, name):
+    path = real(name)
+    ref = laspy.read(path)
+    res = run_json(capsys, str(path))
+    assert res["points"] == len(ref.points) == ref.header.point_count
+    codes, counts = np.unique(np.asarray(ref.classification), return_counts=True)
+    assert [(c["code"], c["count"]) for c in res["classes"]] == list(zip(codes.tolist(), counts.tolist()))
+    assert res["bounds"]["min"] == [float(ref.x.min()), float(ref.y.min()), float(ref.z.min())]
+    assert res["bounds"]["max"] == [float(ref.x.max()), float(ref.y.max()), float(ref.z.max())]
+    rn, rc = np.unique(np.asarray(ref.return_number), return_counts=True)
+    assert res["returns"]["return_number"] == {str(k): v for k, v in zip(rn.tolist(), rc.tolist())}
+    assert res["las"]["version"] == str(ref.header.version)
+    assert res["las"]["point_format"] == ref.point_format.id
+    assert res["las"]["scales"] == ref.header.scales.tolist()
+    assert list(res["attributes"]) == [d for d in ref.point_format.dimension_names if d not in ("X", "Y", "Z")]
+
+
+def test_info_json_several_files_is_a_list(capsys):
+    a, b = real("samp21-utm.laz"), real("warsaw_small.las")
+    res = run_json(capsys, str(a), str(b))
+    assert [r["points"] for r in res] == [12_960, 3_000]
+    assert res[0]["crs"]["epsg"] == 32632
+
+
+def test_info_table(capsys):
+    path = real("crop_1.laz")
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    for text in ("210,582", "EPSG:2154", "high vegetation", "66,454", "ScanChannel (uint8)", "LAS 1.4, point format 6"):
+        assert text in out, text
+
+
+def test_info_of_text_file(tmp_path, capsys):
+    (tmp_path / "a.txt").write_text("x y z classification\n0 0 0 2\n1 1 1 2\n2 2 2 6\n")
+    res = run_json(capsys, str(tmp_path / "a.txt"))
+    assert res["points"] == 3 and res["format"] == "ascii" and res["las"] is None
+    assert res["classes"] == [{"code": 2, "name": "ground", "count": 2}, {"code": 6, "name": "building", "count": 1}]
+    assert res["density"]["unit_assumed"] is True
+
+
+def test_convert_text_with_columns_to_laz(tmp_path, capsys):
+    (tmp_path / "in.pts").write_text("10.5 20.25 3 120 2\n11.5 21.25 4 130 5\n")
+    out = tmp_path / "out.laz"
+    assert main(["convert", str(tmp_path / "in.pts"), str(out), "--columns", "x,y,z,intensity,classification"]) == 0
+    assert "2 points" in capsys.readouterr().out
+    ref = laspy.read(out)
+    assert ref.header.point_format.id == 6
+    assert ref.classification.tolist() == [2, 5] and ref.intensity.tolist() == [120, 130]
+    assert np.allclose(np.column_stack([ref.x, ref.y, ref.z]), [[10.5, 20.25, 3], [11.5, 21.25, 4]])
+
+
+def test_convert_las_to_ascii_ply_and_back(tmp_path):
+    src = real("warsaw_small.las")
+    assert main(["convert", str(src), str(tmp_path / "w.ply"), "--ascii"]) == 0
+    assert b"format ascii 1.0" in (tmp_path / "w.ply").read_bytes()[:100]
+    cloud, ref = read(tmp_path / "w.ply"), laspy.read(src)
+    assert np.array_equal(cloud.xyz, np.column_stack([ref.x, ref.y, ref.z]))
+    assert np.array_equal(cloud["classification"], ref.classification)
+
+
+def test_convert_laz_to_las_passes_header_through(tmp_path):
+    src = real("test_data_77055_627755_LA93_IGN69.laz")
+    assert main(["convert", str(src), str(tmp_path / "tile.las")]) == 0
+    a, b = laspy.read(src), laspy.read(tmp_path / "tile.las")
+    assert not laspy.open(tmp_path / "tile.las").header.are_points_compressed
+    assert a.points.array.tobytes() == b.points.array.tobytes()
+    wkt = lambda h: [v.string for v in h.vlrs if isinstance(v, laspy.vlrs.known.WktCoordinateSystemVlr)]  # noqa: E731
+    assert wkt(a.header) == wkt(b.header) != []
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["info", "{tmp}/missing.laz"], "file not found"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.las", "--ascii"], "--ascii applies to .ply output only"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/a.xyz"], "is the input file"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.las", "--columns", "x,y"], "no column named z"),
+    ],
+)
+def test_cli_errors_in_process(tmp_path, capsys, argv, message):
+    (tmp_path / "a.xyz").write_text("1 2 3\n4 5 6\n")
+    rc = main([a.format(tmp=tmp_path) for a in argv])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.count("\n") == 1 and err.startswith("lidarfx: error: ") and message in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.xyz"]
+    assert (tmp_path / "a.xyz").read_text() == "1 2 3\n4 5 6\n"
+
+
+def test_cli_subprocess_exit_code_and_one_line_error(tmp_path):
+    (tmp_path / "bad.laz").write_bytes(b"LASF" + bytes(100))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run(
+        [sys.executable, "-m", "lidarfx", "info", str(tmp_path / "bad.laz")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("lidarfx: error: cannot read ") and "bad.laz" in proc.stderr
+
+
+def test_cli_subprocess_info_json(tmp_path):
+    src = real("samp41-utm.laz")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run(
+        [sys.executable, "-m", "lidarfx", "info", "--json", str(src)], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert res["points"] == 11_231
+    assert {c["code"]: c["count"] for c in res["classes"]} == {0: 5_629, 2: 5_602}
