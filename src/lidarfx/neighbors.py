@@ -328,6 +328,50 @@ def _knn_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, k, rmax, out_id
 # ----------------------------------------------------------------------------
 # Python side
 # ----------------------------------------------------------------------------
+@nb.njit(cache=True)
+def _counting_sort(key, z, ncells):
+    """Order by column key (counting sort, O(n)), then by z inside each column."""
+    n = key.shape[0]
+    start = np.zeros(ncells + 1, np.int64)
+    for i in range(n):
+        start[key[i] + 1] += 1
+    for c in range(ncells):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        k = key[i]
+        order[fill[k]] = i
+        fill[k] += 1
+    _sort_runs_by_z(order, z, start)
+    return order
+
+
+@nb.njit(cache=True, parallel=True)
+def _sort_runs_by_z(order, z, start):
+    """Sort each run order[start[c]:start[c+1]] by z (insertion sort for short runs)."""
+    nc = start.shape[0] - 1
+    for c in nb.prange(nc):
+        a = start[c]
+        b = start[c + 1]
+        if b - a <= 1:
+            continue
+        if b - a > 64:
+            seg = order[a:b].copy()
+            o = np.argsort(z[seg], kind="mergesort")
+            for t in range(b - a):
+                order[a + t] = seg[o[t]]
+            continue
+        for t in range(a + 1, b):
+            v = order[t]
+            zv = z[v]
+            u = t - 1
+            while u >= a and z[order[u]] > zv:
+                order[u + 1] = order[u]
+                u -= 1
+            order[u + 1] = v
+
+
 def _build(pts_local: np.ndarray, cell: float):
     n = pts_local.shape[0]
     ix = np.floor(pts_local[:, 0] / cell).astype(np.int64)
@@ -335,9 +379,14 @@ def _build(pts_local: np.ndarray, cell: float):
     nx = int(ix.max()) + 1 if n else 1
     ny = int(iy.max()) + 1 if n else 1
     key = ix * ny + iy
-    # sort by z, then stably by column: columns contiguous, z ascending inside
-    oz = np.argsort(pts_local[:, 2], kind="stable")
-    order = oz[np.argsort(key[oz], kind="stable")]
+    ncells = nx * ny
+    dense = ncells <= 4 * n + 4096
+    if dense:
+        order = _counting_sort(key, np.ascontiguousarray(pts_local[:, 2]), ncells)
+    else:
+        # sparse grid (huge extent for the cell size): sort by z, then stably by column
+        oz = np.argsort(pts_local[:, 2], kind="stable")
+        order = oz[np.argsort(key[oz], kind="stable")]
     skey = key[order]
     if n:
         brk = np.flatnonzero(np.diff(skey)) + 1
@@ -346,8 +395,7 @@ def _build(pts_local: np.ndarray, cell: float):
         ckey = skey[cstart]
     else:
         cstart = cend = ckey = np.zeros(0, np.int64)
-    ncells = nx * ny
-    if ncells <= 4 * n + 4096:
+    if dense:
         table = np.full(ncells, -1, np.int64)
         table[ckey] = np.arange(ckey.shape[0], dtype=np.int64)
     else:

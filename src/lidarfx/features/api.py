@@ -113,11 +113,19 @@ def feature_arrays(
         cell = default_cell_for_knn(xyz - xyz.min(0), k) if neighbourhood == "knn" else rs[-1]
         index = NeighborIndex(xyz, cell)
     g = index.grid
-    q = index.to_local(xyz if query_xyz is None else query_xyz)
-    m = len(q)
-    qorder = _grid_order(q, g.cell) if query_xyz is not None else index.order
-    qid = np.arange(m, dtype=np.int64) if query_ids is None else np.asarray(query_ids, dtype=np.int64)
-
+    if query_xyz is None:
+        # the cloud itself: read queries from the sorted points, scatter results back
+        q = g.pts
+        m = len(q)
+        qorder = np.arange(m, dtype=np.int64)
+        opos = index.order
+        qid = index.order
+    else:
+        q = index.to_local(query_xyz)
+        m = len(q)
+        qorder = _grid_order(q, g.cell)
+        opos = np.arange(m, dtype=np.int64)
+        qid = opos if query_ids is None else np.asarray(query_ids, dtype=np.int64)
     if neighbourhood == "knn":
         _, kd = index.knn(q + index.origin, int(k), max_radius=rs[0] if rs else None)
         rk = np.where(np.isfinite(kd), kd, -np.inf).max(axis=1)
@@ -148,14 +156,14 @@ def feature_arrays(
             blk = qorder[a : a + _BLOCK]
             if req.need_engine:
                 point_features(
-                    *g, q, blk, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
+                    *g, q, blk, opos, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
                     int(hist_bins), req.need_cylinder, req.need_pass2, nbuf, out,
                 )
             if req.need_msac:
                 thr = float(d_max if msac_threshold is None else msac_threshold)
                 for s in range(nscale):
                     msac_features(
-                        *g, q, blk, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
+                        *g, q, blk, opos, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
                         10, int(msac_iterations), int(seed), nbuf, out,
                     )
             advance(len(blk))

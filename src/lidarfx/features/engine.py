@@ -15,7 +15,7 @@ sorted grid (:func:`lidarfx.neighbors.column_ranges`) and walks them:
   Lang's height-difference histogram and the octant / above-below counts.
 
 Queries are processed in grid order (``qorder``) so that consecutive queries
-share cached neighbours; results land at their original positions.
+share cached neighbours; results land at their output positions (``opos``).
 """
 from __future__ import annotations
 
@@ -151,7 +151,8 @@ def _any(col, first, last):
 def point_features(
     pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
     q,  # (m, 3) query points, local coordinates
-    qorder,  # query ids to process, in grid order (a block of the full order)
+    qorder,  # rows of q to process, in grid order (a block of the full order)
+    opos,  # (m,) output position of each row of q
     rad,  # (1 or m, S) radii per scale, ascending (one per point for kNN)
     kind,  # KIND_SPHERE / KIND_CYLINDER: neighbourhood of the covariance features
     height,  # half-height of the cylinder (inf = unbounded)
@@ -194,10 +195,11 @@ def point_features(
             i = qorder[t]
             row = i if per_point else 0
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+            oi = opos[i]
             for s in range(nscale):
                 r = rad[row, s]
                 r2 = r * r
-                o = out[s, :, i]
+                o = out[s, :, oi]
                 zwin = max(height, r) if cyl_kind else r
                 nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zwin, lo, hi)
                 _sum_cov(pts, lo, hi, nr, qx, qy, qz, r2, height, cyl_kind, acc)

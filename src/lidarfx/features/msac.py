@@ -40,12 +40,12 @@ def _splitmix(state):
 @nb.njit(cache=True, parallel=True)
 def msac_features(
     pts, cstart, cend, ckey, table, nx, ny, cell,
-    q, qorder, qid, rad, scale, kind, height, scanner, has_scanner,
+    q, qorder, opos, qid, rad, scale, kind, height, scanner, has_scanner,
     col, thr, min_iter, max_iter, seed, nbuf, out,
 ):
-    """MSAC plane features for scale ``scale`` of ``rad``; writes ``out[scale, :, i]``.
+    """MSAC plane features for scale ``scale`` of ``rad``; writes ``out[scale, :, opos[i]]``.
 
-    ``qid`` are global query ids used to seed each point's generator.
+    ``qid[i]`` is the global id of query row i, used to seed its generator.
     """
     m = qorder.shape[0]
     per_point = rad.shape[0] > 1
@@ -62,6 +62,7 @@ def msac_features(
         work = np.empty(12)
         for t in range(ch * chunk, min(m, ch * chunk + chunk)):
             i = qorder[t]
+            oi = opos[i]
             r = rad[i if per_point else 0, scale]
             r2 = r * r
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
@@ -184,7 +185,7 @@ def msac_features(
                 if e * e <= thr2:
                     ss += e * e
                     nin2 += 1
-            o = out[scale, :, i]
+            o = out[scale, :, oi]
             slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
             _put(o, col, S.MSAC_NORMAL_X, nxv)
             _put(o, col, S.MSAC_NORMAL_Y, nyv)
