@@ -23,14 +23,12 @@ import numpy as np
 
 from ..cloud import PointCloud
 from ..errors import LidarfxError
+from ..geometry import EX, EY, EZ, dip_from_normal, normal_from_dip, perpendicular_frame, plane_basis, unit  # noqa: F401
 
 SAMPLINGS = ("random", "grid")
 MAX_POINTS = 50_000_000
 """Refuse to sample more points than this in one primitive (a typo in ``density``)."""
 
-EX = np.array([1.0, 0.0, 0.0])
-EY = np.array([0.0, 1.0, 0.0])
-EZ = np.array([0.0, 0.0, 1.0])
 
 
 # ------------------------------------------------------------------ checks
@@ -95,61 +93,6 @@ def _count(measure: float, density: float) -> int:
 
 
 # -------------------------------------------------------------- orientation
-def unit(v: Any) -> np.ndarray:
-    v = np.asarray(v, dtype=np.float64)
-    n = np.linalg.norm(v)
-    if n == 0:
-        raise LidarfxError("zero-length direction vector")
-    return v / n
-
-
-def normal_from_dip(dip: float, dip_direction: float) -> np.ndarray:
-    """Upward unit normal of a plane with ``dip`` (from horizontal) and ``dip_direction``.
-
-    Degrees; dip direction is the azimuth, clockwise from North (+y), of the
-    down-dip direction.  x = East, y = North, z = Up.  The inverse of
-    :func:`dip_from_normal`: ``n = (sin d sin a, sin d cos a, cos d)``.
-    """
-    d, a = math.radians(dip), math.radians(dip_direction)
-    return np.array([math.sin(d) * math.sin(a), math.sin(d) * math.cos(a), math.cos(d)])
-
-
-def dip_from_normal(normal: Any) -> tuple[float, float]:
-    """``(dip, dip_direction)`` in degrees of the plane with this normal (flipped up)."""
-    n = unit(normal)
-    if n[2] < 0:
-        n = -n
-    dip = math.degrees(math.acos(min(1.0, n[2])))
-    ddir = math.degrees(math.atan2(n[0], n[1])) % 360.0
-    return dip, ddir
-
-
-def plane_basis(normal: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Orthonormal right-handed ``(e1, e2, n)`` of a plane: ``e1`` strike, ``e2`` up-dip.
-
-    ``e1`` is the horizontal strike direction (right-hand rule: azimuth = dip
-    direction − 90°), ``e2 = n × e1`` lies in the plane pointing up-dip, and
-    ``e1 × e2 = n``.  For a horizontal plane ``e1 = x``.
-    """
-    n = unit(normal)
-    h = np.cross(EZ, n)  # horizontal, perpendicular to n: the strike direction
-    if np.linalg.norm(h) < 1e-12:
-        e1 = EX.copy()
-    else:
-        e1 = unit(h)
-    e2 = np.cross(n, e1)
-    return e1, e2, n
-
-
-def perpendicular_frame(axis: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors spanning the plane perpendicular to ``axis`` (first one horizontal if possible)."""
-    d = unit(axis)
-    h = np.cross(d, EZ)
-    e1 = EX.copy() if np.linalg.norm(h) < 1e-9 else unit(h)
-    e2 = np.cross(d, e1)
-    return e1, e2
-
-
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A uniformly distributed (Haar) rotation matrix in SO(3)."""
     q, r = np.linalg.qr(rng.normal(size=(3, 3)))

@@ -1,0 +1,123 @@
+"""Geometry shared by every module: orientations, frames, plane fits.
+
+Conventions (SPEC §1, §6): x = East, y = North, z = Up; angles in degrees.
+Dip = angle of the plane from horizontal, dip direction = azimuth (clockwise
+from North) of the down-dip direction, strike = dip direction − 90° (right-hand
+rule).  Normals are flipped up before converting.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .errors import LidarfxError
+
+EX = np.array([1.0, 0.0, 0.0])
+EY = np.array([0.0, 1.0, 0.0])
+EZ = np.array([0.0, 0.0, 1.0])
+
+
+def unit(v: Any) -> np.ndarray:
+    """``v`` scaled to length 1 (error on a zero vector)."""
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v)
+    if n == 0:
+        raise LidarfxError("zero-length direction vector")
+    return v / n
+
+
+def normal_from_dip(dip: Any, dip_direction: Any) -> np.ndarray:
+    """Upward unit normal(s) ``(sin d sin a, sin d cos a, cos d)`` of planes given in degrees.
+
+    Scalars give shape (3,), arrays give (n, 3).  Inverse of :func:`dip_from_normal`.
+    """
+    d = np.radians(np.asarray(dip, dtype=np.float64))
+    a = np.radians(np.asarray(dip_direction, dtype=np.float64))
+    return np.stack([np.sin(d) * np.sin(a), np.sin(d) * np.cos(a), np.cos(d)], axis=-1)
+
+
+def dip_from_normal(normal: Any) -> tuple[Any, Any]:
+    """``(dip, dip_direction)`` in degrees of the plane(s) with these normals (flipped up).
+
+    One normal (3,) gives two floats; an (n, 3) array gives two arrays.  The
+    dip direction of a horizontal plane is 0 by convention.
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    single = n.ndim == 1
+    n = np.atleast_2d(n)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    if np.any(norm == 0):
+        raise LidarfxError("zero-length normal")
+    n = n / norm
+    n = np.where(n[:, 2:3] < 0, -n, n)
+    dip = np.degrees(np.arccos(np.clip(n[:, 2], -1.0, 1.0)))
+    ddir = np.degrees(np.arctan2(n[:, 0], n[:, 1])) % 360.0
+    if single:
+        return float(dip[0]), float(ddir[0])
+    return dip, ddir
+
+
+def plane_basis(normal: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Orthonormal right-handed ``(e1, e2, n)`` of a plane: ``e1`` strike, ``e2`` up-dip.
+
+    ``e1`` is the horizontal strike direction (right-hand rule: azimuth = dip
+    direction − 90°), ``e2 = n × e1`` lies in the plane pointing up-dip, and
+    ``e1 × e2 = n``.  For a horizontal plane ``e1 = x``.
+    """
+    n = unit(normal)
+    h = np.cross(EZ, n)  # horizontal, perpendicular to n: the strike direction
+    e1 = EX.copy() if np.linalg.norm(h) < 1e-12 else unit(h)
+    e2 = np.cross(n, e1)
+    return e1, e2, n
+
+
+def perpendicular_frame(axis: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane perpendicular to ``axis`` (first one horizontal if possible)."""
+    d = unit(axis)
+    h = np.cross(d, EZ)
+    e1 = EX.copy() if np.linalg.norm(h) < 1e-9 else unit(h)
+    e2 = np.cross(d, e1)
+    return e1, e2
+
+
+def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares plane by PCA: ``(centroid, unit normal flipped up, eigenvalues λ1 ≥ λ2 ≥ λ3)``.
+
+    The RMS distance of the points to the plane is ``sqrt(λ3)``.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) < 3:
+        raise LidarfxError("a plane needs at least 3 points")
+    c = p.mean(axis=0)
+    w, v = np.linalg.eigh(np.cov((p - c).T, bias=True))
+    n = v[:, 0]
+    if n[2] < 0:
+        n = -n
+    return c, n, np.clip(w[::-1], 0.0, None)
+
+
+def hull_area_in_plane(points: np.ndarray, normal: Any) -> float:
+    """Area (m²) of the 2-D convex hull of ``points`` projected onto the plane with ``normal``."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) < 3:
+        return 0.0
+    e1, e2, _ = plane_basis(normal)
+    uv = np.c_[(p - p.mean(axis=0)) @ e1, (p - p.mean(axis=0)) @ e2]
+    try:
+        return float(ConvexHull(uv).volume)  # in 2-D, 'volume' is the area
+    except (QhullError, ValueError):
+        return 0.0
+
+
+def angle_between(a: Any, b: Any, axial: bool = True) -> Any:
+    """Angle in degrees between vectors (rows); ``axial`` treats v and −v as the same direction."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    cos = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+    if axial:
+        cos = np.abs(cos)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
