@@ -160,17 +160,17 @@ def test_not_computable_is_nan():
 # ---------------------------------------------------------------- brute-force reference
 
 
-@pytest.mark.parametrize("kind", ["sphere", "cylinder"])
-def test_every_feature_matches_bruteforce_reference(kind):
+@pytest.mark.parametrize("kind,height", [("sphere", None), ("cylinder", None), ("sphere", 0.2), ("cylinder", 0.3)])
+def test_every_feature_matches_bruteforce_reference(kind, height):
     xyz = scene()
     r = 0.6
     rng = np.random.default_rng(1)
     qi = rng.choice(len(xyz), 60, replace=False)
-    out = compute_features(PointCloud(xyz), "all", radius=r, neighbourhood=kind, query=qi)
+    out = compute_features(PointCloud(xyz), "all", radius=r, neighbourhood=kind, query=qi, height=height)
     skip = {"return_ratio"} | {S.NAMES[s] for s in S.GROUPS["msac"]} | {S.NAMES[s] for s in S.GROUPS["eigenvectors"]}
     checked = 0
     for row, i in enumerate(qi):
-        ref = ref_features(xyz, xyz[i], r, kind=kind)
+        ref = ref_features(xyz, xyz[i], r, kind=kind, height=np.inf if height is None else height)
         for name in out.meta["features"]:
             if name in skip:
                 continue

@@ -339,37 +339,43 @@ def _counting_sort(key, z, ncells):
         start[c + 1] += start[c]
     fill = start[:-1].copy()
     order = np.empty(n, np.int64)
+    zs = np.empty(n)
     for i in range(n):
         k = key[i]
         order[fill[k]] = i
+        zs[fill[k]] = z[i]
         fill[k] += 1
-    _sort_runs_by_z(order, z, start)
+    _sort_runs_by_z(order, zs, start)
     return order
 
 
 @nb.njit(cache=True, parallel=True)
-def _sort_runs_by_z(order, z, start):
-    """Sort each run order[start[c]:start[c+1]] by z (insertion sort for short runs)."""
+def _sort_runs_by_z(order, zs, start):
+    """Sort each run [start[c], start[c+1]) by ``zs`` (the z values in run order),
+    carrying ``order`` along: insertion sort for short runs, merge sort otherwise."""
     nc = start.shape[0] - 1
     for c in nb.prange(nc):
         a = start[c]
         b = start[c + 1]
         if b - a <= 1:
             continue
-        if b - a > 64:
-            seg = order[a:b].copy()
-            o = np.argsort(z[seg], kind="mergesort")
-            for t in range(b - a):
-                order[a + t] = seg[o[t]]
+        if b - a > 48:
+            o = np.argsort(zs[a:b], kind="mergesort")
+            seg = order[a:b][o]
+            zz = zs[a:b][o]
+            order[a:b] = seg
+            zs[a:b] = zz
             continue
         for t in range(a + 1, b):
             v = order[t]
-            zv = z[v]
+            zv = zs[t]
             u = t - 1
-            while u >= a and z[order[u]] > zv:
+            while u >= a and zs[u] > zv:
                 order[u + 1] = order[u]
+                zs[u + 1] = zs[u]
                 u -= 1
             order[u + 1] = v
+            zs[u + 1] = zv
 
 
 def _build(pts_local: np.ndarray, cell: float):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 from typing import Iterable, Sequence
 
+import numba as nb
 import numpy as np
 
 from ..cloud import PointCloud
@@ -49,6 +50,12 @@ def _query_index(query, n: int) -> np.ndarray | None:
     if q.size and (q.min() < 0 or q.max() >= n):
         raise LidarfxError("query indices out of range")
     return q
+
+
+@nb.njit(cache=True, parallel=True)
+def _fill_nan(a):
+    for r in nb.prange(a.shape[0]):
+        a[r, :] = np.nan
 
 
 def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:
@@ -143,7 +150,9 @@ def feature_arrays(
     col = np.full(S.NSLOTS, -1, np.int64)
     for c, s in enumerate(req.slots):
         col[s] = c
-    out = np.full((nscale, len(req.slots), m), np.nan, dtype=np.float32)
+    out = np.empty((nscale, len(req.slots), m), dtype=np.float32)
+    if not req.need_engine:
+        _fill_nan(out.reshape(-1, m))  # otherwise the engine initialises every row it writes
     sc = np.zeros(3) if scanner is None else np.asarray(scanner, dtype=np.float64) - index.origin
     if sc.shape != (3,):
         raise LidarfxError("scanner position must be x,y,z")

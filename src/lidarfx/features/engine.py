@@ -1,21 +1,26 @@
 """The fused neighbourhood-feature kernel.
 
-For every query point and scale the kernel finds the candidate runs of the
-sorted grid (:func:`lidarfx.neighbors.column_ranges`) and walks them:
+For every query point the kernel walks the candidate runs of the sorted grid
+(:func:`lidarfx.neighbors.column_ranges`) of the *widest* neighbourhood once —
+the largest radius; the whole vertical cylinder when density, height or
+histogram features are requested — and compacts the points inside it into a
+small per-thread buffer (structure of arrays: dx, dy, dz, d², h² relative to
+the query point; branch-free).  Everything else runs over that buffer, which
+sits in L1 cache:
 
-* pass 1 (always): the covariance sums of the chosen neighbourhood (sphere or
-  cylinder) relative to the query point — small numbers, numerically safe —
-  in a branch-free loop that the compiler vectorises; when density, height
-  or histogram features are requested, a second lean loop over the vertical
-  cylinder gives sphere / cylinder counts and the cylinder's z moments;
+* per scale, the covariance sums of the chosen neighbourhood (sphere or
+  cylinder) and the cylinder's counts and z moments, in branch-free loops the
+  compiler vectorises;
 * a closed-form eigen solve gives eigen, Westin, plane, density and height
   features;
-* pass 2 (only when requested): the features that need the local plane
-  first — inlier ratio, slope-adaptive echo ratio, quadric curvature — plus
-  Lang's height-difference histogram and the octant / above-below counts.
+* only when requested: inlier ratio and slope-adaptive echo ratio (a second
+  vectorised count once the plane is known), quadric curvature, Lang's
+  height-difference histogram and the octant / above-below counts.
 
-Queries are processed in grid order (``qorder``) so that consecutive queries
-share cached neighbours; results land at their output positions (``opos``).
+So several radii cost one walk of the largest, plus cheap passes over the
+buffer.  Queries are processed in grid order (``qorder``) so that consecutive
+queries share cached neighbours; results land at their output positions
+(``opos``).
 """
 from __future__ import annotations
 
@@ -45,30 +50,66 @@ _NACC = 17
 _INL, _ECHO, _ABV, _BLW, _CABV, _CBLW = range(6)
 
 
-@nb.njit(cache=True, fastmath=_FAST)
-def _sum_cov(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, acc):
-    """Covariance sums over the sphere (or cylinder) of squared radius r2."""
-    n = sx = sy = sz = xx = xy = xz = yy = yz = zz = 0.0
+# rows of the compact buffer
+_BX, _BY, _BZ, _BD2, _BH2 = 0, 1, 2, 3, 4
+
+
+@nb.njit(cache=True)
+def _compact(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, buf):
+    """Copy the points of the runs inside the sphere (or the cylinder of half-height
+    ``height``) of squared radius r2 into ``buf`` (branch-free: every candidate is
+    written, the count advances when inside).  The caller passes the union of
+    every neighbourhood it needs: the cylinder with half-height max(limit, r).
+
+    Returns the count, or -1 when ``buf`` is too small (the caller grows it).
+    """
+    need = 0
+    for k in range(nr):
+        need += hi[k] - lo[k]
+    if need > buf.shape[1]:
+        return -1
+    cnt = 0
     for k in range(nr):
         for j in range(lo[k], hi[k]):
             dx = pts[j, 0] - qx
             dy = pts[j, 1] - qy
             dz = pts[j, 2] - qz
             h2 = dx * dx + dy * dy
+            d2 = h2 + dz * dz
+            buf[_BX, cnt] = dx
+            buf[_BY, cnt] = dy
+            buf[_BZ, cnt] = dz
+            buf[_BD2, cnt] = d2
+            buf[_BH2, cnt] = h2
             if cylinder:
-                w = 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
+                cnt += h2 <= r2 and abs(dz) <= height
             else:
-                w = 1.0 if h2 + dz * dz <= r2 else 0.0
-            n += w
-            sx += w * dx
-            sy += w * dy
-            sz += w * dz
-            xx += w * dx * dx
-            xy += w * dx * dy
-            xz += w * dx * dz
-            yy += w * dy * dy
-            yz += w * dy * dz
-            zz += w * dz * dz
+                cnt += d2 <= r2
+    return cnt
+
+
+@nb.njit(cache=True, fastmath=_FAST)
+def _sum_cov(buf, cnt, r2, height, cylinder, acc):
+    """Covariance sums over the sphere (or cylinder) of squared radius r2."""
+    n = sx = sy = sz = xx = xy = xz = yy = yz = zz = 0.0
+    for j in range(cnt):
+        dx = buf[_BX, j]
+        dy = buf[_BY, j]
+        dz = buf[_BZ, j]
+        if cylinder:
+            w = 1.0 if (buf[_BH2, j] <= r2 and abs(dz) <= height) else 0.0
+        else:
+            w = 1.0 if buf[_BD2, j] <= r2 else 0.0
+        n += w
+        sx += w * dx
+        sy += w * dy
+        sz += w * dz
+        xx += w * dx * dx
+        xy += w * dx * dy
+        xz += w * dx * dz
+        yy += w * dy * dy
+        yz += w * dy * dz
+        zz += w * dz * dz
     acc[_N] = n
     acc[_SX] = sx
     acc[_SY] = sy
@@ -82,26 +123,22 @@ def _sum_cov(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, acc):
 
 
 @nb.njit(cache=True, fastmath=_FAST)
-def _sum_cyl(pts, lo, hi, nr, qx, qy, qz, r2, height, acc):
+def _sum_cyl(buf, cnt, r2, height, acc):
     """Sphere count, cylinder count and the cylinder's z moments (relative to the query)."""
     nsph = ncyl = cz = czz = czzz = 0.0
-    zmn = np.inf
-    zmx = -np.inf
-    for k in range(nr):
-        for j in range(lo[k], hi[k]):
-            dx = pts[j, 0] - qx
-            dy = pts[j, 1] - qy
-            dz = pts[j, 2] - qz
-            h2 = dx * dx + dy * dy
-            nsph += 1.0 if h2 + dz * dz <= r2 else 0.0
-            inc = h2 <= r2 and abs(dz) <= height
-            w = 1.0 if inc else 0.0
-            ncyl += w
-            cz += w * dz
-            czz += w * dz * dz
-            czzz += w * dz * dz * dz
-            zmn = min(zmn, dz if inc else np.inf)
-            zmx = max(zmx, dz if inc else -np.inf)
+    zmn = 1e300
+    zmx = -1e300
+    for j in range(cnt):
+        dz = buf[_BZ, j]
+        nsph += 1.0 if buf[_BD2, j] <= r2 else 0.0
+        w = 1.0 if (buf[_BH2, j] <= r2 and abs(dz) <= height) else 0.0
+        ncyl += w
+        cz += w * dz
+        czz += w * dz * dz
+        czzz += w * dz * dz * dz
+        off = (1.0 - w) * 1e30  # pushes outside points out of the min / max
+        zmn = min(zmn, dz + off)
+        zmx = max(zmx, dz - off)
     acc[_NSPH] = nsph
     acc[_NCYL] = ncyl
     acc[_CZMIN] = zmn
@@ -112,22 +149,20 @@ def _sum_cyl(pts, lo, hi, nr, qx, qy, qz, r2, height, acc):
 
 
 @nb.njit(cache=True, fastmath=_FAST)
-def _count_plane(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax, rr2, acc):
+def _count_plane(buf, cnt, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax, rr2, acc):
     """Inliers of the local plane (within dmax) among the neighbours, and the
     slope-adaptive echo count: cylinder points within the sphere of squared radius rr2."""
     inl = echo = 0.0
-    for k in range(nr):
-        for j in range(lo[k], hi[k]):
-            dx = pts[j, 0] - qx
-            dy = pts[j, 1] - qy
-            dz = pts[j, 2] - qz
-            h2 = dx * dx + dy * dy
-            d2 = h2 + dz * dz
-            in_cyl = h2 <= r2 and abs(dz) <= height
-            member = in_cyl if cylinder else d2 <= r2
-            dist = (dx - cx) * nx_ + (dy - cy) * ny_ + (dz - cz) * nz_
-            inl += 1.0 if (member and abs(dist) <= dmax) else 0.0
-            echo += 1.0 if (in_cyl and d2 <= rr2) else 0.0
+    for j in range(cnt):
+        dx = buf[_BX, j]
+        dy = buf[_BY, j]
+        dz = buf[_BZ, j]
+        d2 = buf[_BD2, j]
+        wc = 1.0 if (buf[_BH2, j] <= r2 and abs(dz) <= height) else 0.0
+        wm = wc if cylinder else (1.0 if d2 <= r2 else 0.0)
+        dist = (dx - cx) * nx_ + (dy - cy) * ny_ + (dz - cz) * nz_
+        inl += wm * (1.0 if abs(dist) <= dmax else 0.0)
+        echo += wc * (1.0 if d2 <= rr2 else 0.0)
     acc[_INL] = inl
     acc[_ECHO] = echo
 
@@ -165,7 +200,7 @@ def point_features(
     need_cyl,
     need_pass2,
     nbuf,  # size of the column-run buffers
-    out,  # (S, F, m) float32, pre-filled with NaN (out[s, f] is one contiguous feature)
+    out,  # (S, F, m) float32; every row of a processed query is written (NaN = not computable)
 ):
     m = qorder.shape[0]
     nscale = rad.shape[1]
@@ -180,8 +215,7 @@ def point_features(
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
-        clo = np.empty(nbuf, np.int64)
-        chi = np.empty(nbuf, np.int64)
+        buf = np.empty((5, 1024))
         acc = np.empty(_NACC)
         p2 = np.empty(6)
         quad = np.empty(27)
@@ -196,24 +230,26 @@ def point_features(
             row = i if per_point else 0
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
             oi = opos[i]
+            # one walk of the widest neighbourhood, compacted into buf
+            rmax = rad[row, nscale - 1]
+            wide_cyl = need_cyl or cyl_kind
+            zwin = max(height, rmax) if wide_cyl else rmax
+            nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, rmax, zwin, lo, hi)
+            cnt = _compact(pts, lo, hi, nr, qx, qy, qz, rmax * rmax, zwin, wide_cyl, buf)
+            if cnt < 0:
+                need = 0
+                for k in range(nr):
+                    need += hi[k] - lo[k]
+                buf = np.empty((5, 2 * need))
+                cnt = _compact(pts, lo, hi, nr, qx, qy, qz, rmax * rmax, zwin, wide_cyl, buf)
             for s in range(nscale):
                 r = rad[row, s]
                 r2 = r * r
                 o = out[s, :, oi]
-                zwin = max(height, r) if cyl_kind else r
-                nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zwin, lo, hi)
-                _sum_cov(pts, lo, hi, nr, qx, qy, qz, r2, height, cyl_kind, acc)
-                ncr = 0
+                o[:] = np.nan
+                _sum_cov(buf, cnt, r2, height, cyl_kind, acc)
                 if need_cyl:
-                    if cyl_kind:
-                        clo[:nr] = lo[:nr]
-                        chi[:nr] = hi[:nr]
-                        ncr = nr
-                    else:
-                        ncr = column_ranges(
-                            pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, max(height, r), clo, chi
-                        )
-                    _sum_cyl(pts, clo, chi, ncr, qx, qy, qz, r2, height, acc)
+                    _sum_cyl(buf, cnt, r2, height, acc)
                 n = acc[_N]
                 _put(o, col, S.N_NEIGHBOURS, n)
                 nsph = acc[_NSPH]
@@ -286,16 +322,9 @@ def point_features(
                 if not need_pass2:
                     continue
                 # ------------------------------------------------------ pass 2
-                # the runs of the widest window walked in pass 1
-                wl = clo if need_cyl else lo
-                wh = chi if need_cyl else hi
-                nw = ncr if need_cyl else nr
                 if plane_ok and want_plane_counts:
                     rr = r / math.cos(math.radians(min(slope, 80.0)))
-                    _count_plane(
-                        pts, wl, wh, nw, qx, qy, qz, r2, height, cyl_kind,
-                        cx, cy, cz, nxv, nyv, nzv, dmax, rr * rr, p2,
-                    )
+                    _count_plane(buf, cnt, r2, height, cyl_kind, cx, cy, cz, nxv, nyv, nzv, dmax, rr * rr, p2)
                     _put(o, col, S.PLANE_INLIER_RATIO, p2[_INL] / n)
                     if need_cyl and ncyl > 0.0:
                         _put(o, col, S.ECHO_RATIO_SLOPE, 100.0 * p2[_ECHO] / ncyl)
@@ -308,37 +337,35 @@ def point_features(
                 amax = 0.0
                 if need_cyl:
                     amax = max(-acc[_CZMIN], acc[_CZMAX])
-                for k in range(nw):
-                    for j in range(wl[k], wh[k]):
-                        dx = pts[j, 0] - qx
-                        dy = pts[j, 1] - qy
-                        dz = pts[j, 2] - qz
-                        h2 = dx * dx + dy * dy
-                        d2 = h2 + dz * dz
-                        in_cyl = h2 <= r2 and abs(dz) <= height
-                        if in_cyl and want_hist:
-                            u = 0.0 if amax <= 0.0 else -dz / amax
-                            b = int((u + 1.0) * 0.5 * nbins)
-                            b = min(max(b, 0), nbins - 1)
-                            hist[b] += 1.0
-                            if dz > 0.0:
-                                p2[_CABV] += 1.0
-                            elif dz < 0.0:
-                                p2[_CBLW] += 1.0
-                        if not (in_cyl if cyl_kind else d2 <= r2):
-                            continue
-                        if want_dist:
-                            if dz > 0.0:
-                                p2[_ABV] += 1.0
-                            elif dz < 0.0:
-                                p2[_BLW] += 1.0
-                            if d2 > 0.0:
-                                octbits |= 1 << ((dx > 0.0) * 4 + (dy > 0.0) * 2 + (dz > 0.0))
-                        if want_curv and plane_ok:
-                            uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
-                            ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
-                            hh = (dx * nxv + dy * nyv + dz * nzv) / r
-                            accumulate_quadric(quad, uu, ww, hh)
+                for j in range(cnt):
+                    dx = buf[_BX, j]
+                    dy = buf[_BY, j]
+                    dz = buf[_BZ, j]
+                    d2 = buf[_BD2, j]
+                    in_cyl = buf[_BH2, j] <= r2 and abs(dz) <= height
+                    if in_cyl and want_hist:
+                        u = 0.0 if amax <= 0.0 else -dz / amax
+                        b = int((u + 1.0) * 0.5 * nbins)
+                        b = min(max(b, 0), nbins - 1)
+                        hist[b] += 1.0
+                        if dz > 0.0:
+                            p2[_CABV] += 1.0
+                        elif dz < 0.0:
+                            p2[_CBLW] += 1.0
+                    if not (in_cyl if cyl_kind else d2 <= r2):
+                        continue
+                    if want_dist:
+                        if dz > 0.0:
+                            p2[_ABV] += 1.0
+                        elif dz < 0.0:
+                            p2[_BLW] += 1.0
+                        if d2 > 0.0:
+                            octbits |= 1 << ((dx > 0.0) * 4 + (dy > 0.0) * 2 + (dz > 0.0))
+                    if want_curv and plane_ok:
+                        uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
+                        ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
+                        hh = (dx * nxv + dy * nyv + dz * nzv) / r
+                        accumulate_quadric(quad, uu, ww, hh)
                 if want_hist and need_cyl and ncyl > 0.0:
                     histogram_features(hist, ncyl, p2[_CABV], p2[_CBLW], col, o)
                 if want_dist and n > 0.0:

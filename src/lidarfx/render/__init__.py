@@ -1,6 +1,7 @@
 """Pictures of point clouds and features (matplotlib, headless)."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Sequence
 
@@ -76,5 +77,81 @@ def feature_views(
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+
+def segment_view(
+    cloud: PointCloud,
+    path: str | Path,
+    *,
+    attribute: str = "segment_id",
+    view: str = "top",
+    pixels: int = 700,
+    cell: float | None = None,
+    title: str | None = None,
+    dpi: int = 100,
+    seed: int = 0,
+) -> Path:
+    """Save a PNG of the cloud seen from ``view``, one random colour per segment.
+
+    Made for many segments (hundreds or thousands), where a categorical map
+    with a legend does not work.  The picture is a raster of about ``pixels``
+    cells along the longer side (or of ``cell`` metres; by default never finer
+    than 1.5 × the mean point spacing, so sparse ALS has no holes); each cell shows the point nearest to the
+    viewer (the highest one seen from the top).  Segment ids ≥ 0 get random,
+    seeded colours; points without a segment (id < 0) are shown in a grey
+    ramp by height (top view) so the context stays readable; empty cells are
+    white.  A raster keeps the PNG small whatever the number of points.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    a, b, xl, yl = _view_axes(view)
+    depth_axis = ({0, 1, 2} - {a, b}).pop()
+    xyz = cloud.xyz - cloud.origin
+    ids = np.asarray(cloud[attribute]).astype(np.int64)
+    u, v = xyz[:, a], xyz[:, b]
+    ext_u, ext_v = float(np.ptp(u)) if len(u) else 1.0, float(np.ptp(v)) if len(v) else 1.0
+    if cell is None:
+        spacing = math.sqrt(max(ext_u * ext_v, 1e-12) / max(len(u), 1))
+        cell = max(max(ext_u, ext_v, 1e-9) / max(int(pixels), 10), 1.5 * spacing)
+    cell = float(cell)
+    nu = int(ext_u / cell) + 1
+    nv = int(ext_v / cell) + 1
+    iu = np.minimum(((u - u.min(initial=0)) / cell).astype(np.int64), nu - 1) if len(u) else u.astype(np.int64)
+    iv = np.minimum(((v - v.min(initial=0)) / cell).astype(np.int64), nv - 1) if len(v) else v.astype(np.int64)
+    pix = iv * nu + iu
+    # nearest to the viewer: highest z from the top, smallest depth from front/side
+    near = xyz[:, 2] if view == "top" else -xyz[:, depth_axis]
+    order = np.lexsort((near, pix))
+    last = np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1] if len(order) else np.zeros(0, np.int64)
+    win = order[last]
+    img = np.ones((nv * nu, 3))
+    nid = int(ids.max(initial=-1)) + 1
+    palette = np.random.default_rng(seed).uniform(0.12, 0.95, size=(max(nid, 1), 3))
+    seg = ids[win] >= 0
+    img[pix[win[seg]]] = palette[ids[win[seg]]]
+    rest = win[~seg]
+    if len(rest):
+        zz = xyz[rest, 2]
+        lo, hi = np.percentile(xyz[:, 2], [2, 98])
+        g = 0.55 + 0.35 * np.clip((zz - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+        img[pix[rest]] = np.c_[g, g, g]
+    img = img.reshape(nv, nu, 3)
+    w = 7.0
+    fig, ax = plt.subplots(figsize=(w, max(2.0, min(w * nv / nu, 1.4 * w))))
+    ax.imshow(img, origin="lower", interpolation="nearest", extent=(0, nu * cell, 0, nv * cell))
+    ax.set_xlabel(xl, fontsize=8)
+    ax.set_ylabel(yl, fontsize=8)
+    ax.tick_params(labelsize=7)
+    if title:
+        ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
     return Path(path)

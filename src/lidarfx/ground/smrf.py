@@ -1,0 +1,111 @@
+"""Simple Morphological Filter (SMRF), Pingel, Clarke & McBride (2013).
+
+Steps (paper section numbers in brackets):
+
+1. minimum surface: the lowest point per ``cell`` × ``cell`` grid cell [2.1];
+   empty cells are inpainted (here: linear TIN interpolation of the filled
+   cells, nearest value outside their hull; the paper uses spring inpainting);
+2. low outliers: cells far *below* their neighbours are found by the same
+   progressive filter run on the negated surface (slope 5, radius 1 cell, as
+   in PDAL's ``filters.smrf``) and dropped;
+3. progressive morphological opening with a disk of radius 1, 2, … up to
+   ``window``/``cell`` cells [2.2]; at radius r a cell is an object when the
+   previous (less opened) surface exceeds the newly opened one by more than
+   ``slope · r · cell``;
+4. provisional DTM: the minimum surface without object, low-outlier and empty
+   cells, inpainted [2.3];
+5. final classification [2.4]: a point is ground when its vertical distance to
+   the provisional DTM (bilinear) is at most ``threshold + scalar · g``, g
+   being the DTM gradient (rise / run) in the point's cell.
+"""
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from .grid import GridSpec, bilinear, cell_index, gradient_slope, inpaint, min_surface, open_disk
+
+__all__ = ["progressive_objects", "provisional_dtm", "smrf", "SmrfSurface"]
+
+LOW_OUTLIER_SLOPE = 5.0
+"""Slope of the low-outlier pass (on the negated minimum surface), as PDAL."""
+LOW_OUTLIER_RADIUS = 1
+"""Radius (cells) of the low-outlier pass."""
+
+
+class SmrfSurface(NamedTuple):
+    """The provisional DTM of SMRF and the grid it lives on."""
+
+    grid: np.ndarray  # (ny, nx) filled provisional DTM, local z
+    spec: GridSpec
+    kept: np.ndarray  # (ny, nx) bool: cells whose minimum survived (not object/low/empty)
+    seeds: np.ndarray  # indices of the minimum points of the kept cells
+
+
+def progressive_objects(
+    zfill: np.ndarray,
+    cell: float,
+    slope: float,
+    max_radius: int,
+    advance: Callable[[int], None] | None = None,
+) -> np.ndarray:
+    """Cells flagged as objects by the progressive opening of ``zfill`` (no NaN)."""
+    obj = np.zeros(zfill.shape, dtype=bool)
+    last = zfill
+    for r in range(1, max_radius + 1):
+        opened = open_disk(last, r)
+        obj |= (last - opened) > slope * r * cell
+        last = opened
+        if advance is not None:
+            advance(1)
+    return obj
+
+
+def provisional_dtm(
+    xyz: np.ndarray,
+    *,
+    cell: float,
+    slope: float,
+    window: float,
+    advance: Callable[[int], None] | None = None,
+) -> SmrfSurface:
+    """Steps 1–4 of SMRF on local coordinates ``xyz`` (n×3)."""
+    spec = GridSpec(xyz[:, :2], cell)
+    i, j = cell_index(xyz[:, :2], spec)
+    zmin, arg = min_surface(i, j, xyz[:, 2], spec)
+    empty = ~np.isfinite(zmin)
+    zfill = inpaint(zmin, spec)
+    low = progressive_objects(-zfill, cell, LOW_OUTLIER_SLOPE, LOW_OUTLIER_RADIUS) & ~empty
+    if low.any():
+        z2 = zmin.copy()
+        z2[low] = np.nan
+        zfill = inpaint(z2, spec)
+    radius = max(1, int(round(window / cell)))
+    obj = progressive_objects(zfill, cell, slope, radius, advance)
+    kept = ~(obj | empty | low)
+    if not kept.any():  # nothing survived (e.g. a single roof): keep the lowest cell
+        kept = np.zeros_like(kept)
+        kept.flat[int(np.nanargmin(zmin))] = True
+    zpro = np.where(kept, zmin, np.nan)
+    zpro = inpaint(zpro, spec)
+    return SmrfSurface(zpro, spec, kept, arg[kept])
+
+
+def smrf(
+    xyz: np.ndarray,
+    *,
+    cell: float = 1.0,
+    slope: float = 0.15,
+    window: float = 18.0,
+    threshold: float = 0.5,
+    scalar: float = 1.25,
+    advance: Callable[[int], None] | None = None,
+) -> tuple[np.ndarray, SmrfSurface]:
+    """SMRF ground mask of local points ``xyz`` (n×3) and the provisional DTM."""
+    surf = provisional_dtm(xyz, cell=cell, slope=slope, window=window, advance=advance)
+    i, j = cell_index(xyz[:, :2], surf.spec)
+    g = gradient_slope(surf.grid, cell)
+    z = bilinear(surf.grid, surf.spec, xyz[:, :2])
+    ground = np.abs(xyz[:, 2] - z) <= threshold + scalar * g[i, j]
+    return ground, surf
