@@ -133,6 +133,46 @@ def column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, radi
     return nr
 
 
+# rows of the buffer filled by ``gather``
+G_DX, G_DY, G_DZ, G_D2, G_H2 = 0, 1, 2, 3, 4
+
+
+@nb.njit(cache=True)
+def gather(pts, lo, hi, nr, qx, qy, qz, r2, zhalf, cylinder, buf):
+    """Copy the neighbours found in the runs into ``buf`` relative to the query point.
+
+    Neighbours are the points within squared radius ``r2`` of (qx, qy, qz) —
+    in 3-D, or in 2-D with ``|dz| <= zhalf`` when ``cylinder``.  ``buf`` is a
+    (5, capacity) array with rows dx, dy, dz, d², h² (``G_*`` constants);
+    the loop is branch-free (every candidate is written, the count advances
+    when inside).  Returns ``(buf, count)``; ``buf`` is replaced by a larger
+    array when the runs hold more candidates than it can take.
+    """
+    need = 0
+    for k in range(nr):
+        need += hi[k] - lo[k]
+    if need > buf.shape[1]:
+        buf = np.empty((5, 2 * need))
+    cnt = 0
+    for k in range(nr):
+        for j in range(lo[k], hi[k]):
+            dx = pts[j, 0] - qx
+            dy = pts[j, 1] - qy
+            dz = pts[j, 2] - qz
+            h2 = dx * dx + dy * dy
+            d2 = h2 + dz * dz
+            buf[G_DX, cnt] = dx
+            buf[G_DY, cnt] = dy
+            buf[G_DZ, cnt] = dz
+            buf[G_D2, cnt] = d2
+            buf[G_H2, cnt] = h2
+            if cylinder:
+                cnt += h2 <= r2 and abs(dz) <= zhalf
+            else:
+                cnt += d2 <= r2
+    return buf, cnt
+
+
 def ring_buffer_size(radius_max: float, cell: float) -> int:
     m = int(math.ceil(radius_max / cell))
     return (2 * m + 1) ** 2
@@ -142,9 +182,11 @@ def ring_buffer_size(radius_max: float, cell: float) -> int:
 # kernels
 # ----------------------------------------------------------------------------
 @nb.njit(cache=True, parallel=True)
-def _count_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf):
+def _radius_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf, collect, offsets, out_idx, out_d):
+    """Count the neighbours of each query; with ``collect`` also write them (sorted-order
+    indices and distances) into the CSR arrays at ``offsets``."""
     m = q.shape[0]
-    out = np.zeros(m, np.int64)
+    counts = np.zeros(m, np.int64)
     nchunk = (m + 1023) // 1024
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
@@ -155,6 +197,7 @@ def _count_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylin
             r2 = r * r
             zh = zhalf if cylinder else r
             nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
+            w = offsets[i] if collect else 0
             cnt = 0
             for k in range(nr):
                 for j in range(lo[k], hi[k]):
@@ -165,38 +208,12 @@ def _count_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylin
                         dz = pts[j, 2] - qz
                         d2 += dz * dz
                     if d2 <= r2:
+                        if collect:
+                            out_idx[w + cnt] = j
+                            out_d[w + cnt] = math.sqrt(d2)
                         cnt += 1
-            out[i] = cnt
-    return out
-
-
-@nb.njit(cache=True, parallel=True)
-def _collect_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf, offsets, out_idx, out_d):
-    """Write neighbour indices (sorted order) and distances into CSR arrays."""
-    m = q.shape[0]
-    nchunk = (m + 1023) // 1024
-    for ch in nb.prange(nchunk):
-        lo = np.empty(nbuf, np.int64)
-        hi = np.empty(nbuf, np.int64)
-        for i in range(ch * 1024, min(m, ch * 1024 + 1024)):
-            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
-            r = radius[i] if radius.shape[0] > 1 else radius[0]
-            r2 = r * r
-            zh = zhalf if cylinder else r
-            nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
-            w = offsets[i]
-            for k in range(nr):
-                for j in range(lo[k], hi[k]):
-                    dx = pts[j, 0] - qx
-                    dy = pts[j, 1] - qy
-                    d2 = dx * dx + dy * dy
-                    if not cylinder:
-                        dz = pts[j, 2] - qz
-                        d2 += dz * dz
-                    if d2 <= r2:
-                        out_idx[w] = j
-                        out_d[w] = math.sqrt(d2)
-                        w += 1
+            counts[i] = cnt
+    return counts
 
 
 @nb.njit(cache=True, inline="always")
@@ -471,9 +488,19 @@ class NeighborIndex:
         """Number of points within ``radius`` of each query (sphere, or vertical cylinder)."""
         ql = self.to_local(q)
         r = self._radius_array(radius, len(ql))
+        return self._walk(ql, r, cylinder, height)
+
+    def _walk(self, ql, r, cylinder, height, offsets=None):
         g = self.grid
         zhalf = np.inf if height is None else float(height)
-        return _count_kernel(*g, ql, r, cylinder, zhalf, ring_buffer_size(float(r.max(initial=0)), g.cell))
+        nbuf = ring_buffer_size(float(r.max(initial=0)), g.cell)
+        if offsets is None:
+            empty = np.zeros(0, np.int64)
+            return _radius_kernel(*g, ql, r, cylinder, zhalf, nbuf, False, empty, empty, np.zeros(0))
+        idx = np.empty(offsets[-1], np.int64)
+        dist = np.empty(offsets[-1], np.float64)
+        _radius_kernel(*g, ql, r, cylinder, zhalf, nbuf, True, offsets, idx, dist)
+        return idx, dist
 
     def query_radius(self, q: np.ndarray, radius, cylinder: bool = False, height: float | None = None):
         """Neighbours within ``radius`` as CSR: ``(offsets, indices, distances)``.
@@ -484,15 +511,10 @@ class NeighborIndex:
         """
         ql = self.to_local(q)
         r = self._radius_array(radius, len(ql))
-        g = self.grid
-        zhalf = np.inf if height is None else float(height)
-        nbuf = ring_buffer_size(float(r.max(initial=0)), g.cell)
-        counts = _count_kernel(*g, ql, r, cylinder, zhalf, nbuf)
+        counts = self._walk(ql, r, cylinder, height)
         offsets = np.zeros(len(ql) + 1, np.int64)
         np.cumsum(counts, out=offsets[1:])
-        idx = np.empty(offsets[-1], np.int64)
-        dist = np.empty(offsets[-1], np.float64)
-        _collect_kernel(*g, ql, r, cylinder, zhalf, nbuf, offsets, idx, dist)
+        idx, dist = self._walk(ql, r, cylinder, height, offsets)
         return offsets, self.order[idx], dist
 
     def knn(self, q: np.ndarray, k: int, max_radius: float | None = None):

@@ -25,13 +25,6 @@ import numba as nb
 from . import slots as S
 
 
-@nb.njit(cache=True, inline="always")
-def _put(row, col, slot, value):
-    c = col[slot]
-    if c >= 0:
-        row[c] = value
-
-
 @nb.njit(cache=True)
 def solve_sym6(qa, work):
     """Solve the 6×6 normal equations packed in ``qa`` (see ``accumulate_quadric``).
@@ -89,7 +82,7 @@ def quadric_curvatures(qa, radius, work, col, out):
     hm = ((1.0 + c * c) * 2.0 * d - 2.0 * b * c * e + (1.0 + b * b) * 2.0 * f) / (2.0 * g2 ** 1.5)
     kg = (4.0 * d * f - e * e) / (g2 * g2)
     disc = math.sqrt(max(hm * hm - kg, 0.0))
-    _put(out, col, S.K1, hm + disc)
-    _put(out, col, S.K2, hm - disc)
-    _put(out, col, S.MEAN_CURVATURE, hm)
-    _put(out, col, S.GAUSS_CURVATURE, kg)
+    S.put(out, col, S.K1, hm + disc)
+    S.put(out, col, S.K2, hm - disc)
+    S.put(out, col, S.MEAN_CURVATURE, hm)
+    S.put(out, col, S.GAUSS_CURVATURE, kg)

@@ -144,40 +144,23 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, work):
     m00 = u[0] * aux + u[1] * auy + u[2] * auz - e_mid
     m01 = u[0] * avx + u[1] * avy + u[2] * avz
     m11 = v[0] * avx + v[1] * avy + v[2] * avz - e_mid
-    am00, am01, am11 = abs(m00), abs(m01), abs(m11)
-    mid = work[9:12]
-    if am00 >= am11:
-        mm = max(am00, am01)
-        if mm > 0.0:
-            if am00 >= am01:
-                m01 /= m00
-                m00 = 1.0 / math.sqrt(1.0 + m01 * m01)
-                m01 *= m00
-            else:
-                m00 /= m01
-                m01 = 1.0 / math.sqrt(1.0 + m00 * m00)
-                m00 *= m01
-            for t in range(3):
-                mid[t] = m01 * u[t] - m00 * v[t]
-        else:
-            for t in range(3):
-                mid[t] = u[t]
+    # (m00 m01; m01 m11) is singular: the middle eigenvector is the null vector
+    # (q, −p) of its larger row (p, q), expressed in the (u, v) basis
+    if abs(m00) >= abs(m11):
+        p, qq = m00, m01
     else:
-        mm = max(am11, am01)
-        if mm > 0.0:
-            if am11 >= am01:
-                m01 /= m11
-                m11 = 1.0 / math.sqrt(1.0 + m01 * m01)
-                m01 *= m11
-            else:
-                m11 /= m01
-                m01 = 1.0 / math.sqrt(1.0 + m11 * m11)
-                m11 *= m01
-            for t in range(3):
-                mid[t] = m11 * u[t] - m01 * v[t]
-        else:
-            for t in range(3):
-                mid[t] = u[t]
+        p, qq = m01, m11
+    mid = work[9:12]
+    mm = max(abs(p), abs(qq))
+    if mm > 0.0:
+        p /= mm
+        qq /= mm
+        inv = 1.0 / math.sqrt(p * p + qq * qq)
+        for t in range(3):
+            mid[t] = (qq * u[t] - p * v[t]) * inv
+    else:
+        for t in range(3):
+            mid[t] = u[t]
     # third = first × mid
     tx = w[1] * mid[2] - w[2] * mid[1]
     ty = w[2] * mid[0] - w[0] * mid[2]
@@ -204,13 +187,6 @@ def _rayleigh(a00, a01, a02, a11, a12, a22, x, y, z):
     return a00 * x * x + a11 * y * y + a22 * z * z + 2.0 * (a01 * x * y + a02 * x * z + a12 * y * z)
 
 
-@nb.njit(cache=True, inline="always")
-def _put(out, col, slot, value):
-    c = col[slot]
-    if c >= 0:
-        out[c] = value
-
-
 @nb.njit(cache=True)
 def eigen_features(lam, v3z, convention, col, out):
     """Write the eigen and Westin features (SPEC §3) for eigenvalues ``lam``.
@@ -219,27 +195,27 @@ def eigen_features(lam, v3z, convention, col, out):
     feature slots to output columns (-1 = not requested).
     """
     l1, l2, l3 = lam[0], lam[1], lam[2]
-    _put(out, col, S.EIGENVALUE1, l1)
-    _put(out, col, S.EIGENVALUE2, l2)
-    _put(out, col, S.EIGENVALUE3, l3)
-    _put(out, col, S.EIGENVALUE_SUM, l1 + l2 + l3)
-    _put(out, col, S.VERTICALITY, 1.0 - abs(v3z))
+    S.put(out, col, S.EIGENVALUE1, l1)
+    S.put(out, col, S.EIGENVALUE2, l2)
+    S.put(out, col, S.EIGENVALUE3, l3)
+    S.put(out, col, S.EIGENVALUE_SUM, l1 + l2 + l3)
+    S.put(out, col, S.VERTICALITY, 1.0 - abs(v3z))
     if convention == CONV_PDAL:
         l1, l2, l3 = math.sqrt(l1), math.sqrt(l2), math.sqrt(l3)
     tot = l1 + l2 + l3
     if l1 <= 0.0 or tot <= 0.0:
         return  # everything below divides by λ1: leave NaN
     e1, e2, e3 = l1 / tot, l2 / tot, l3 / tot
-    _put(out, col, S.LINEARITY, (l1 - l2) / l1)
-    _put(out, col, S.PLANARITY, (l2 - l3) / l1)
-    _put(out, col, S.SPHERICITY, l3 / l1)
-    _put(out, col, S.ANISOTROPY, (l1 - l3) / l1)
-    _put(out, col, S.SURFACE_VARIATION, e3)
+    S.put(out, col, S.LINEARITY, (l1 - l2) / l1)
+    S.put(out, col, S.PLANARITY, (l2 - l3) / l1)
+    S.put(out, col, S.SPHERICITY, l3 / l1)
+    S.put(out, col, S.ANISOTROPY, (l1 - l3) / l1)
+    S.put(out, col, S.SURFACE_VARIATION, e3)
     if convention == CONV_CLOUDCOMPARE:
         a1, a2, a3 = l1, l2, l3
     else:
         a1, a2, a3 = e1, e2, e3
-    _put(out, col, S.OMNIVARIANCE, (a1 * a2 * a3) ** (1.0 / 3.0))
+    S.put(out, col, S.OMNIVARIANCE, (a1 * a2 * a3) ** (1.0 / 3.0))
     ent = 0.0
     if a1 > 0.0:
         ent -= a1 * math.log(a1)
@@ -247,10 +223,10 @@ def eigen_features(lam, v3z, convention, col, out):
         ent -= a2 * math.log(a2)
     if a3 > 0.0:
         ent -= a3 * math.log(a3)
-    _put(out, col, S.EIGENENTROPY, ent)
+    S.put(out, col, S.EIGENENTROPY, ent)
     if l1 > l3:
-        _put(out, col, S.SFFI_X, (l1 - l2) / (l1 - l3))
-    _put(out, col, S.SFFI_Y, l3 / l1)
-    _put(out, col, S.WESTIN_LINEAR, e1 - e2)
-    _put(out, col, S.WESTIN_PLANAR, 2.0 * (e2 - e3))
-    _put(out, col, S.WESTIN_SPHERICAL, 3.0 * e3)
+        S.put(out, col, S.SFFI_X, (l1 - l2) / (l1 - l3))
+    S.put(out, col, S.SFFI_Y, l3 / l1)
+    S.put(out, col, S.WESTIN_LINEAR, e1 - e2)
+    S.put(out, col, S.WESTIN_PLANAR, 2.0 * (e2 - e3))
+    S.put(out, col, S.WESTIN_SPHERICAL, 3.0 * e3)

@@ -29,7 +29,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..neighbors import column_ranges
+from ..neighbors import G_D2, G_DX, G_DY, G_DZ, G_H2, column_ranges, gather
 from . import slots as S
 from .curvature import quadric_curvatures
 from .eigen import eigen_features, eigh3
@@ -50,42 +50,8 @@ _NACC = 17
 _INL, _ECHO, _ABV, _BLW, _CABV, _CBLW = range(6)
 
 
-# rows of the compact buffer
-_BX, _BY, _BZ, _BD2, _BH2 = 0, 1, 2, 3, 4
-
-
-@nb.njit(cache=True)
-def _compact(pts, lo, hi, nr, qx, qy, qz, r2, height, cylinder, buf):
-    """Copy the points of the runs inside the sphere (or the cylinder of half-height
-    ``height``) of squared radius r2 into ``buf`` (branch-free: every candidate is
-    written, the count advances when inside).  The caller passes the union of
-    every neighbourhood it needs: the cylinder with half-height max(limit, r).
-
-    Returns the count, or -1 when ``buf`` is too small (the caller grows it).
-    """
-    need = 0
-    for k in range(nr):
-        need += hi[k] - lo[k]
-    if need > buf.shape[1]:
-        return -1
-    cnt = 0
-    for k in range(nr):
-        for j in range(lo[k], hi[k]):
-            dx = pts[j, 0] - qx
-            dy = pts[j, 1] - qy
-            dz = pts[j, 2] - qz
-            h2 = dx * dx + dy * dy
-            d2 = h2 + dz * dz
-            buf[_BX, cnt] = dx
-            buf[_BY, cnt] = dy
-            buf[_BZ, cnt] = dz
-            buf[_BD2, cnt] = d2
-            buf[_BH2, cnt] = h2
-            if cylinder:
-                cnt += h2 <= r2 and abs(dz) <= height
-            else:
-                cnt += d2 <= r2
-    return cnt
+# rows of the gathered neighbour buffer (lidarfx.neighbors.gather)
+_BX, _BY, _BZ, _BD2, _BH2 = G_DX, G_DY, G_DZ, G_D2, G_H2
 
 
 @nb.njit(cache=True, fastmath=_FAST)
@@ -167,21 +133,6 @@ def _count_plane(buf, cnt, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax
     acc[_ECHO] = echo
 
 
-@nb.njit(cache=True, inline="always")
-def _put(row, col, slot, value):
-    c = col[slot]
-    if c >= 0:
-        row[c] = value
-
-
-@nb.njit(cache=True, inline="always")
-def _any(col, first, last):
-    for sl in range(first, last + 1):
-        if col[sl] >= 0:
-            return True
-    return False
-
-
 @nb.njit(cache=True, parallel=True)
 def point_features(
     pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
@@ -206,9 +157,9 @@ def point_features(
     nscale = rad.shape[1]
     per_point = rad.shape[0] > 1
     cyl_kind = kind == KIND_CYLINDER
-    want_curv = _any(col, S.K1, S.GAUSS_CURVATURE)
-    want_hist = _any(col, S.DH_PEAKS, S.DH_MAX_BIN)
-    want_dist = _any(col, S.OCTANT_OCCUPANCY, S.Z_ASYMMETRY)
+    want_curv = S.any_requested(col, S.K1, S.GAUSS_CURVATURE)
+    want_hist = S.any_requested(col, S.DH_PEAKS, S.DH_MAX_BIN)
+    want_dist = S.any_requested(col, S.OCTANT_OCCUPANCY, S.Z_ASYMMETRY)
     want_plane_counts = col[S.PLANE_INLIER_RATIO] >= 0 or col[S.ECHO_RATIO_SLOPE] >= 0
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
@@ -235,13 +186,7 @@ def point_features(
             wide_cyl = need_cyl or cyl_kind
             zwin = max(height, rmax) if wide_cyl else rmax
             nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, rmax, zwin, lo, hi)
-            cnt = _compact(pts, lo, hi, nr, qx, qy, qz, rmax * rmax, zwin, wide_cyl, buf)
-            if cnt < 0:
-                need = 0
-                for k in range(nr):
-                    need += hi[k] - lo[k]
-                buf = np.empty((5, 2 * need))
-                cnt = _compact(pts, lo, hi, nr, qx, qy, qz, rmax * rmax, zwin, wide_cyl, buf)
+            buf, cnt = gather(pts, lo, hi, nr, qx, qy, qz, rmax * rmax, zwin, wide_cyl, buf)
             for s in range(nscale):
                 r = rad[row, s]
                 r2 = r * r
@@ -251,31 +196,31 @@ def point_features(
                 if need_cyl:
                     _sum_cyl(buf, cnt, r2, height, acc)
                 n = acc[_N]
-                _put(o, col, S.N_NEIGHBOURS, n)
+                S.put(o, col, S.N_NEIGHBOURS, n)
                 nsph = acc[_NSPH]
                 ncyl = acc[_NCYL]
                 if need_cyl and ncyl > 0.0:
                     d2d = ncyl / (math.pi * r2)
                     d3d = nsph / (4.0 / 3.0 * math.pi * r2 * r)
-                    _put(o, col, S.DENSITY_2D, d2d)
-                    _put(o, col, S.DENSITY_3D, d3d)
-                    _put(o, col, S.DENSITY_RATIO, d3d / d2d)
-                    _put(o, col, S.NEIGHBOUR_RATIO, nsph / ncyl)
-                    _put(o, col, S.ECHO_RATIO, 100.0 * nsph / ncyl)
+                    S.put(o, col, S.DENSITY_2D, d2d)
+                    S.put(o, col, S.DENSITY_3D, d3d)
+                    S.put(o, col, S.DENSITY_RATIO, d3d / d2d)
+                    S.put(o, col, S.NEIGHBOUR_RATIO, nsph / ncyl)
+                    S.put(o, col, S.ECHO_RATIO, 100.0 * nsph / ncyl)
                     # height features (Chehata 2009), relative to the query's z
-                    _put(o, col, S.DZ_BELOW, -acc[_CZMIN])
-                    _put(o, col, S.DZ_ABOVE, acc[_CZMAX])
-                    _put(o, col, S.Z_RANGE, acc[_CZMAX] - acc[_CZMIN])
+                    S.put(o, col, S.DZ_BELOW, -acc[_CZMIN])
+                    S.put(o, col, S.DZ_ABOVE, acc[_CZMAX])
+                    S.put(o, col, S.Z_RANGE, acc[_CZMAX] - acc[_CZMIN])
                     mz = acc[_CZ] / ncyl
                     var = max(acc[_CZZ] / ncyl - mz * mz, 0.0)
-                    _put(o, col, S.Z_STD, math.sqrt(var))
+                    S.put(o, col, S.Z_STD, math.sqrt(var))
                     # dh = z_p - z_j = -dz: same std (metres), opposite skewness
-                    _put(o, col, S.DH_STD, math.sqrt(var))
+                    S.put(o, col, S.DH_STD, math.sqrt(var))
                     if var > 1e-24:
                         m3 = acc[_CZZZ] / ncyl - 3.0 * mz * acc[_CZZ] / ncyl + 2.0 * mz * mz * mz
-                        _put(o, col, S.DH_SKEWNESS, -m3 / (var * math.sqrt(var)))
+                        S.put(o, col, S.DH_SKEWNESS, -m3 / (var * math.sqrt(var)))
                     else:
-                        _put(o, col, S.DH_SKEWNESS, 0.0)
+                        S.put(o, col, S.DH_SKEWNESS, 0.0)
                 plane_ok = False
                 cx = cy = cz = 0.0
                 nxv = nyv = nzv = 0.0
@@ -284,7 +229,7 @@ def point_features(
                     cx = acc[_SX] / n
                     cy = acc[_SY] / n
                     cz = acc[_SZ] / n
-                    _put(o, col, S.CENTROID_OFFSET, math.sqrt(cx * cx + cy * cy + cz * cz) / r)
+                    S.put(o, col, S.CENTROID_OFFSET, math.sqrt(cx * cx + cy * cy + cz * cz) / r)
                 if n >= 3.0:
                     eigh3(
                         acc[_XX] / n - cx * cx, acc[_XY] / n - cx * cy, acc[_XZ] / n - cx * cz,
@@ -300,21 +245,21 @@ def point_features(
                         nxv, nyv, nzv = -nxv, -nyv, -nzv
                     eigen_features(lam, nzv, convention, col, o)
                     slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
-                    _put(o, col, S.NORMAL_X, nxv)
-                    _put(o, col, S.NORMAL_Y, nyv)
-                    _put(o, col, S.NORMAL_Z, nzv)
-                    _put(o, col, S.SLOPE, slope)
+                    S.put(o, col, S.NORMAL_X, nxv)
+                    S.put(o, col, S.NORMAL_Y, nyv)
+                    S.put(o, col, S.NORMAL_Z, nzv)
+                    S.put(o, col, S.SLOPE, slope)
                     if slope >= 0.1:
                         sg = 1.0 if nzv >= 0.0 else -1.0  # aspect of the up-facing normal
-                        _put(o, col, S.ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
-                    _put(o, col, S.PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
-                    _put(o, col, S.PLANE_STD, math.sqrt(lam[2]))
+                        S.put(o, col, S.ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
+                    S.put(o, col, S.PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
+                    S.put(o, col, S.PLANE_STD, math.sqrt(lam[2]))
                     e1x, e1y, e1z = v1[0], v1[1], v1[2]
                     if e1z < 0.0 or (e1z == 0.0 and e1x < 0.0):
                         e1x, e1y, e1z = -e1x, -e1y, -e1z
-                    _put(o, col, S.EIGENVECTOR1_X, e1x)
-                    _put(o, col, S.EIGENVECTOR1_Y, e1y)
-                    _put(o, col, S.EIGENVECTOR1_Z, e1z)
+                    S.put(o, col, S.EIGENVECTOR1_X, e1x)
+                    S.put(o, col, S.EIGENVECTOR1_Y, e1y)
+                    S.put(o, col, S.EIGENVECTOR1_Z, e1z)
                     v2[0] = nyv * v1[2] - nzv * v1[1]
                     v2[1] = nzv * v1[0] - nxv * v1[2]
                     v2[2] = nxv * v1[1] - nyv * v1[0]
@@ -325,9 +270,9 @@ def point_features(
                 if plane_ok and want_plane_counts:
                     rr = r / math.cos(math.radians(min(slope, 80.0)))
                     _count_plane(buf, cnt, r2, height, cyl_kind, cx, cy, cz, nxv, nyv, nzv, dmax, rr * rr, p2)
-                    _put(o, col, S.PLANE_INLIER_RATIO, p2[_INL] / n)
+                    S.put(o, col, S.PLANE_INLIER_RATIO, p2[_INL] / n)
                     if need_cyl and ncyl > 0.0:
-                        _put(o, col, S.ECHO_RATIO_SLOPE, 100.0 * p2[_ECHO] / ncyl)
+                        S.put(o, col, S.ECHO_RATIO_SLOPE, 100.0 * p2[_ECHO] / ncyl)
                 if not (want_hist or want_dist or (want_curv and plane_ok)):
                     continue
                 p2[:] = 0.0
@@ -373,8 +318,8 @@ def point_features(
                     while octbits:
                         cnt += octbits & 1
                         octbits >>= 1
-                    _put(o, col, S.OCTANT_OCCUPANCY, cnt)
-                    _put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
+                    S.put(o, col, S.OCTANT_OCCUPANCY, cnt)
+                    S.put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
                 if want_curv and plane_ok and n >= 6.0:
                     quadric_curvatures(quad, r, work, col, o)
 

@@ -23,13 +23,6 @@ import numba as nb
 from . import slots as S
 
 
-@nb.njit(cache=True, inline="always")
-def _put(row, col, slot, value):
-    c = col[slot]
-    if c >= 0:
-        row[c] = value
-
-
 @nb.njit(cache=True)
 def histogram_features(hist, n, n_above, n_below, col, out):
     nb_ = hist.shape[0]
@@ -52,10 +45,10 @@ def histogram_features(hist, n, n_above, n_below, col, out):
         if h > 0.0:
             p = h / n
             ent -= p * math.log(p)
-    _put(out, col, S.DH_PEAKS, peaks)
+    S.put(out, col, S.DH_PEAKS, peaks)
     # mean gap between consecutive peaks = (last - first) / (peaks - 1)
-    _put(out, col, S.DH_PEAK_DISTANCE, (last - first) / (peaks - 1) if peaks >= 2 else 0.0)
-    _put(out, col, S.DH_SHARE_ABOVE, n_above / n)
-    _put(out, col, S.DH_SHARE_BELOW, n_below / n)
-    _put(out, col, S.DH_ENTROPY, ent)
-    _put(out, col, S.DH_MAX_BIN, -1.0 + (best + 0.5) * 2.0 / nb_)
+    S.put(out, col, S.DH_PEAK_DISTANCE, (last - first) / (peaks - 1) if peaks >= 2 else 0.0)
+    S.put(out, col, S.DH_SHARE_ABOVE, n_above / n)
+    S.put(out, col, S.DH_SHARE_BELOW, n_below / n)
+    S.put(out, col, S.DH_ENTROPY, ent)
+    S.put(out, col, S.DH_MAX_BIN, -1.0 + (best + 0.5) * 2.0 / nb_)

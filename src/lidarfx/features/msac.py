@@ -16,16 +16,9 @@ import math
 import numba as nb
 import numpy as np
 
-from ..neighbors import column_ranges
+from ..neighbors import G_DX, G_DY, G_DZ, column_ranges, gather
 from . import slots as S
 from .eigen import eigh3
-
-
-@nb.njit(cache=True, inline="always")
-def _put(row, col, slot, value):
-    c = col[slot]
-    if c >= 0:
-        row[c] = value
 
 
 @nb.njit(cache=True, inline="always")
@@ -55,7 +48,7 @@ def msac_features(
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
-        buf = np.empty((256, 3))
+        buf = np.empty((5, 256))
         lam = np.empty(3)
         v1 = np.empty(3)
         v3 = np.empty(3)
@@ -68,26 +61,7 @@ def msac_features(
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
             zh = r if kind == 0 else max(height, r)
             nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
-            cnt = 0
-            for k in range(nr):
-                for j in range(lo[k], hi[k]):
-                    dx = pts[j, 0] - qx
-                    dy = pts[j, 1] - qy
-                    dz = pts[j, 2] - qz
-                    h2 = dx * dx + dy * dy
-                    if kind == 0:
-                        if h2 + dz * dz > r2:
-                            continue
-                    elif h2 > r2 or abs(dz) > height:
-                        continue
-                    if cnt == buf.shape[0]:
-                        nbuf2 = np.empty((2 * cnt, 3))
-                        nbuf2[:cnt] = buf
-                        buf = nbuf2
-                    buf[cnt, 0] = dx
-                    buf[cnt, 1] = dy
-                    buf[cnt, 2] = dz
-                    cnt += 1
+            buf, cnt = gather(pts, lo, hi, nr, qx, qy, qz, r2, height, kind == 1, buf)
             if cnt < 3:
                 continue
             state = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(qid[i])
@@ -105,12 +79,12 @@ def msac_features(
                 ic = int(c % np.uint64(cnt))
                 if ia == ib or ia == ic or ib == ic:
                     continue
-                ux = buf[ib, 0] - buf[ia, 0]
-                uy = buf[ib, 1] - buf[ia, 1]
-                uz = buf[ib, 2] - buf[ia, 2]
-                wx = buf[ic, 0] - buf[ia, 0]
-                wy = buf[ic, 1] - buf[ia, 1]
-                wz = buf[ic, 2] - buf[ia, 2]
+                ux = buf[G_DX, ib] - buf[G_DX, ia]
+                uy = buf[G_DY, ib] - buf[G_DY, ia]
+                uz = buf[G_DZ, ib] - buf[G_DZ, ia]
+                wx = buf[G_DX, ic] - buf[G_DX, ia]
+                wy = buf[G_DY, ic] - buf[G_DY, ia]
+                wz = buf[G_DZ, ic] - buf[G_DZ, ia]
                 nxv = uy * wz - uz * wy
                 nyv = uz * wx - ux * wz
                 nzv = ux * wy - uy * wx
@@ -120,11 +94,11 @@ def msac_features(
                 nxv /= nn
                 nyv /= nn
                 nzv /= nn
-                d0 = nxv * buf[ia, 0] + nyv * buf[ia, 1] + nzv * buf[ia, 2]
+                d0 = nxv * buf[G_DX, ia] + nyv * buf[G_DY, ia] + nzv * buf[G_DZ, ia]
                 cost = 0.0
                 ninl = 0
                 for j in range(cnt):
-                    e = nxv * buf[j, 0] + nyv * buf[j, 1] + nzv * buf[j, 2] - d0
+                    e = nxv * buf[G_DX, j] + nyv * buf[G_DY, j] + nzv * buf[G_DZ, j] - d0
                     e2 = e * e
                     if e2 < thr2:
                         cost += e2
@@ -148,22 +122,22 @@ def msac_features(
             sx = sy = sz = 0.0
             ninl = 0
             for j in range(cnt):
-                e = bnx * buf[j, 0] + bny * buf[j, 1] + bnz * buf[j, 2] - bd
+                e = bnx * buf[G_DX, j] + bny * buf[G_DY, j] + bnz * buf[G_DZ, j] - bd
                 if e * e <= thr2:
-                    sx += buf[j, 0]
-                    sy += buf[j, 1]
-                    sz += buf[j, 2]
+                    sx += buf[G_DX, j]
+                    sy += buf[G_DY, j]
+                    sz += buf[G_DZ, j]
                     ninl += 1
             if ninl < 3:
                 continue
             cx, cy, cz = sx / ninl, sy / ninl, sz / ninl
             cxx = cxy = cxz = cyy = cyz = czz = 0.0
             for j in range(cnt):
-                e = bnx * buf[j, 0] + bny * buf[j, 1] + bnz * buf[j, 2] - bd
+                e = bnx * buf[G_DX, j] + bny * buf[G_DY, j] + bnz * buf[G_DZ, j] - bd
                 if e * e <= thr2:
-                    ex = buf[j, 0] - cx
-                    ey = buf[j, 1] - cy
-                    ez = buf[j, 2] - cz
+                    ex = buf[G_DX, j] - cx
+                    ey = buf[G_DY, j] - cy
+                    ez = buf[G_DZ, j] - cz
                     cxx += ex * ex
                     cxy += ex * ey
                     cxz += ex * ez
@@ -181,20 +155,20 @@ def msac_features(
             ss = 0.0
             nin2 = 0
             for j in range(cnt):
-                e = (buf[j, 0] - cx) * nxv + (buf[j, 1] - cy) * nyv + (buf[j, 2] - cz) * nzv
+                e = (buf[G_DX, j] - cx) * nxv + (buf[G_DY, j] - cy) * nyv + (buf[G_DZ, j] - cz) * nzv
                 if e * e <= thr2:
                     ss += e * e
                     nin2 += 1
             o = out[scale, :, oi]
             slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
-            _put(o, col, S.MSAC_NORMAL_X, nxv)
-            _put(o, col, S.MSAC_NORMAL_Y, nyv)
-            _put(o, col, S.MSAC_NORMAL_Z, nzv)
-            _put(o, col, S.MSAC_SLOPE, slope)
+            S.put(o, col, S.MSAC_NORMAL_X, nxv)
+            S.put(o, col, S.MSAC_NORMAL_Y, nyv)
+            S.put(o, col, S.MSAC_NORMAL_Z, nzv)
+            S.put(o, col, S.MSAC_SLOPE, slope)
             if slope >= 0.1:
                 sg = 1.0 if nzv >= 0.0 else -1.0
-                _put(o, col, S.MSAC_ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
-            _put(o, col, S.MSAC_PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
+                S.put(o, col, S.MSAC_ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
+            S.put(o, col, S.MSAC_PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
             if nin2 > 0:
-                _put(o, col, S.MSAC_PLANE_STD, math.sqrt(ss / nin2))
-            _put(o, col, S.MSAC_INLIER_RATIO, nin2 / cnt)
+                S.put(o, col, S.MSAC_PLANE_STD, math.sqrt(ss / nin2))
+            S.put(o, col, S.MSAC_INLIER_RATIO, nin2 / cnt)

@@ -6,6 +6,8 @@ that column map.  Slot numbers are compile-time constants for numba.
 """
 from __future__ import annotations
 
+import numba as nb
+
 # fmt: off
 EIGENVALUE1, EIGENVALUE2, EIGENVALUE3, EIGENVALUE_SUM = 0, 1, 2, 3
 LINEARITY, PLANARITY, SPHERICITY, ANISOTROPY = 4, 5, 6, 7
@@ -72,3 +74,20 @@ PASS2_SLOTS = frozenset(
 )
 #: slots computed by the robust (MSAC) plane kernel
 MSAC_SLOTS = frozenset(GROUPS["msac"])
+
+
+@nb.njit(cache=True, inline="always")
+def put(row, col, slot, value):
+    """Write ``value`` into the output row at the column of ``slot``, if requested."""
+    c = col[slot]
+    if c >= 0:
+        row[c] = value
+
+
+@nb.njit(cache=True, inline="always")
+def any_requested(col, first, last):
+    """Is any slot of ``first..last`` requested?"""
+    for sl in range(first, last + 1):
+        if col[sl] >= 0:
+            return True
+    return False

@@ -1,0 +1,197 @@
+"""Ground classification (SMRF), DTM rasters, height above ground and filter accuracy.
+
+Public API
+----------
+:func:`classify_ground`            bool mask of ground points (SMRF, Pingel et al. 2013)
+:func:`apply_ground_classification` copy of a cloud with ``classification`` 2 / 1 set
+:func:`dtm`                        DTM :class:`Raster` (TIN of the ground points)
+:func:`height_above_ground`        z minus the ground surface under each point
+:func:`ground_errors`              type I / type II / total error (Sithole & Vosselman 2004)
+
+See ``docs/ground.md`` for the method, the parameters and their tuning.
+"""
+from __future__ import annotations
+
+from typing import Any, Iterable
+
+import numpy as np
+
+from .. import progress as _progress
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+from .dtm import cloud_crs, dtm, height_above_ground
+from .evaluate import ground_errors
+from .raster import Raster
+
+__all__ = [
+    "DEFAULTS",
+    "IGNORE_CLASSES",
+    "classify_ground",
+    "apply_ground_classification",
+    "candidate_mask",
+    "dtm",
+    "height_above_ground",
+    "ground_errors",
+    "Raster",
+    "cloud_crs",
+]
+
+DEFAULTS: dict[str, float] = {
+    "cell": 1.0,
+    "slope": 0.15,
+    "window": 18.0,
+    "threshold": 0.5,
+    "scalar": 1.25,
+}
+"""The one default parameter set (tuned on the 8 ISPRS samples, see docs/ground.md).
+
+``cell``      grid cell of the minimum surface (m)
+``slope``     slope (rise/run) of the progressive opening's elevation threshold
+``window``    largest opening radius (m)
+``threshold`` final elevation threshold (m)
+``scalar``    final threshold added per unit of DTM slope (m per rise/run)
+"""
+
+IGNORE_CLASSES: tuple[int, ...] = (7, 18, 66)
+"""Classes never used and never made ground: low noise 7, high noise 18, IGN virtual points 66."""
+
+GROUND_CLASS = 2
+NON_GROUND_CLASS = 1
+MAX_CELLS = 400_000_000
+
+
+def _xyz_attrs(cloud: Any) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    if isinstance(cloud, PointCloud):
+        return cloud.xyz, cloud.attrs
+    xyz = np.asarray(cloud, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise LidarfxError(f"expected a PointCloud or an (n, 3) array, got shape {xyz.shape}")
+    return xyz, {}
+
+
+def candidate_mask(
+    cloud: Any, *, last_returns: bool = True, ignore_classes: Iterable[int] | None = IGNORE_CLASSES
+) -> np.ndarray:
+    """Points the filter uses: not in ``ignore_classes`` and, when return
+    information is present (``return_number`` and ``number_of_returns`` both
+    > 0), last returns only (``return_number == number_of_returns``)."""
+    xyz, attrs = _xyz_attrs(cloud)
+    cand = np.all(np.isfinite(xyz), axis=1)
+    ign = list(ignore_classes or [])
+    if ign and "classification" in attrs:
+        cand &= ~np.isin(attrs["classification"], ign)
+    if last_returns and "return_number" in attrs and "number_of_returns" in attrs:
+        rn = np.asarray(attrs["return_number"]).astype(np.int64)
+        nr = np.asarray(attrs["number_of_returns"]).astype(np.int64)
+        known = (rn > 0) & (nr > 0)
+        cand &= ~known | (rn == nr)
+    return cand
+
+
+def _check_params(p: dict[str, float]) -> None:
+    for name in ("cell", "window"):
+        if not (np.isfinite(p[name]) and p[name] > 0):
+            raise LidarfxError(f"{name} must be a positive number, got {p[name]!r}")
+    for name in ("slope", "threshold", "scalar"):
+        if not (np.isfinite(p[name]) and p[name] >= 0):
+            raise LidarfxError(f"{name} must be a non-negative number, got {p[name]!r}")
+
+
+def classify_ground(
+    cloud: Any,
+    *,
+    cell: float = DEFAULTS["cell"],
+    slope: float = DEFAULTS["slope"],
+    window: float = DEFAULTS["window"],
+    threshold: float = DEFAULTS["threshold"],
+    scalar: float = DEFAULTS["scalar"],
+    last_returns: bool = True,
+    ignore_classes: Iterable[int] | None = IGNORE_CLASSES,
+    progress: bool | None = None,
+) -> np.ndarray:
+    """Ground mask of an ALS point cloud by SMRF (Pingel, Clarke & McBride 2013).
+
+    Parameters
+    ----------
+    cloud:
+        :class:`~lidarfx.PointCloud` or an ``(n, 3)`` array of coordinates.
+    cell, slope, window, threshold, scalar:
+        SMRF parameters, defaults :data:`DEFAULTS` (see docs/ground.md).
+    last_returns:
+        Use only last returns where return information exists; other returns
+        are never ground.
+    ignore_classes:
+        Classes (of an existing ``classification``) that are neither used nor
+        made ground; default :data:`IGNORE_CLASSES` (noise 7, 18; virtual 66).
+    progress:
+        Progress bar: ``True``/``False``, or ``None`` for large clouds on a terminal.
+
+    Returns
+    -------
+    numpy.ndarray
+        Boolean mask, ``True`` = ground.
+    """
+    from .smrf import smrf
+
+    params = {"cell": float(cell), "slope": float(slope), "window": float(window),
+              "threshold": float(threshold), "scalar": float(scalar)}
+    _check_params(params)
+    xyz, _ = _xyz_attrs(cloud)
+    cand = candidate_mask(cloud, last_returns=last_returns, ignore_classes=ignore_classes)
+    mask = np.zeros(len(xyz), dtype=bool)
+    idx = np.nonzero(cand)[0]
+    if len(idx) == 0:
+        return mask
+    pts = xyz[idx]
+    local = pts - pts.min(axis=0)
+    ext = local.max(axis=0)
+    cells = (ext[0] / cell + 1) * (ext[1] / cell + 1)
+    if cells > MAX_CELLS:
+        raise LidarfxError(
+            f"the cloud spans {ext[0]:.0f} x {ext[1]:.0f} m: {cells:.3g} cells of {cell} m is too many; "
+            "cut it into tiles or use a larger cell"
+        )
+    radius = max(1, int(round(window / cell)))
+    with _progress.bar("ground (SMRF)", radius, _progress.wanted(progress, len(idx))) as advance:
+        ground, _ = smrf(local, advance=advance, **params)
+    mask[idx] = ground
+    return mask
+
+
+def apply_ground_classification(
+    cloud: PointCloud,
+    ground: np.ndarray | None = None,
+    *,
+    ignore_classes: Iterable[int] | None = IGNORE_CLASSES,
+    **params: Any,
+) -> PointCloud:
+    """A copy of ``cloud`` with ``classification`` set from the ground filter.
+
+    Ground points get class 2; every other point gets class 1 (unclassified),
+    except points whose existing class is in ``ignore_classes`` (noise 7/18
+    and virtual points 66 by default), which keep it.  Any other earlier class
+    (including an old 2) is overwritten.  ``ground`` is a precomputed mask;
+    otherwise :func:`classify_ground` runs with ``ignore_classes`` and
+    ``**params``.  The parameters used go to ``meta["ground"]``.
+    """
+    if not isinstance(cloud, PointCloud):
+        raise LidarfxError("apply_ground_classification needs a PointCloud")
+    if ground is None:
+        ground = classify_ground(cloud, ignore_classes=ignore_classes, **params)
+    ground = np.asarray(ground, dtype=bool)
+    if ground.shape != (len(cloud),):
+        raise LidarfxError(f"ground mask must have length {len(cloud)}")
+    out = cloud.copy()
+    old = out.get("classification")
+    dtype = old.dtype if old is not None else np.uint8
+    cls = np.full(len(out), NON_GROUND_CLASS, dtype=dtype)
+    ign = list(ignore_classes or [])
+    if old is not None and ign:
+        keep = np.isin(old, ign)
+        cls[keep] = old[keep]
+    cls[ground] = GROUND_CLASS
+    out["classification"] = cls
+    used = {**DEFAULTS, **{k: float(v) for k, v in params.items() if k in DEFAULTS}}
+    out.meta = {**out.meta, "ground": {"method": "smrf", **used, "ignore_classes": ign,
+                                       "ground_points": int(ground.sum())}}
+    return out

@@ -90,6 +90,7 @@ def segment_view(
     view: str = "top",
     pixels: int = 700,
     cell: float | None = None,
+    height_panel: bool = False,
     title: str | None = None,
     dpi: int = 100,
     seed: int = 0,
@@ -97,13 +98,15 @@ def segment_view(
     """Save a PNG of the cloud seen from ``view``, one random colour per segment.
 
     Made for many segments (hundreds or thousands), where a categorical map
-    with a legend does not work.  The picture is a raster of about ``pixels``
-    cells along the longer side (or of ``cell`` metres; by default never finer
-    than 1.5 × the mean point spacing, so sparse ALS has no holes); each cell shows the point nearest to the
-    viewer (the highest one seen from the top).  Segment ids ≥ 0 get random,
-    seeded colours; points without a segment (id < 0) are shown in a grey
-    ramp by height (top view) so the context stays readable; empty cells are
-    white.  A raster keeps the PNG small whatever the number of points.
+    with a legend does not work: each id ≥ 0 gets a random, seeded, saturated
+    colour.  The picture is a raster of about ``pixels`` cells along the
+    longer side (or of ``cell`` metres; by default never finer than 1.5 × the
+    mean point spacing, so sparse ALS has no holes); each cell shows the point
+    nearest to the viewer (the highest one seen from the top).  Points without
+    a segment (id < 0) are drawn in a grey ramp by height so the context stays
+    readable; empty cells are white.  A raster keeps the PNG small whatever
+    the number of points.  ``height_panel`` adds a first panel with the same
+    raster coloured by z.
     """
     import matplotlib
 
@@ -132,7 +135,13 @@ def segment_view(
     win = order[last]
     img = np.ones((nv * nu, 3))
     nid = int(ids.max(initial=-1)) + 1
-    palette = np.random.default_rng(seed).uniform(0.12, 0.95, size=(max(nid, 1), 3))
+    # saturated random colours (never grey: grey is for unsegmented points)
+    prng = np.random.default_rng(seed)
+    k = max(nid, 1)
+    hsv = np.c_[prng.uniform(0, 1, k), prng.uniform(0.45, 1.0, k), prng.uniform(0.55, 1.0, k)]
+    from matplotlib.colors import hsv_to_rgb
+
+    palette = hsv_to_rgb(hsv)
     seg = ids[win] >= 0
     img[pix[win[seg]]] = palette[ids[win[seg]]]
     rest = win[~seg]
@@ -143,13 +152,24 @@ def segment_view(
         img[pix[rest]] = np.c_[g, g, g]
     img = img.reshape(nv, nu, 3)
     w = 7.0
-    fig, ax = plt.subplots(figsize=(w, max(2.0, min(w * nv / nu, 1.4 * w))))
-    ax.imshow(img, origin="lower", interpolation="nearest", extent=(0, nu * cell, 0, nv * cell))
-    ax.set_xlabel(xl, fontsize=8)
-    ax.set_ylabel(yl, fontsize=8)
-    ax.tick_params(labelsize=7)
+    npan = 2 if height_panel else 1
+    fig, axes = plt.subplots(1, npan, figsize=(w * npan, max(2.0, min(w * nv / nu, 1.4 * w))), squeeze=False)
+    extent = (0, nu * cell, 0, nv * cell)
+    if height_panel:
+        zimg = np.full(nv * nu, np.nan)
+        zimg[pix[win]] = cloud.xyz[win, 2] if view == "top" else cloud.xyz[win, depth_axis]
+        ax = axes[0, 0]
+        im = ax.imshow(zimg.reshape(nv, nu), origin="lower", interpolation="nearest", extent=extent, cmap="viridis")
+        fig.colorbar(im, ax=ax, fraction=0.04, pad=0.01).set_label("z [m]" if view == "top" else "depth [m]", fontsize=8)
+        ax.set_title("height", fontsize=9)
+    ax = axes[0, npan - 1]
+    ax.imshow(img, origin="lower", interpolation="nearest", extent=extent)
+    for ax in axes[0]:
+        ax.set_xlabel(xl, fontsize=8)
+        ax.set_ylabel(yl, fontsize=8)
+        ax.tick_params(labelsize=7)
     if title:
-        ax.set_title(title, fontsize=9)
+        axes[0, npan - 1].set_title(title, fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")

@@ -1,0 +1,173 @@
+"""Digital terrain model raster and height above ground from ground points."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+from .raster import Raster
+from .tin import tin_interpolate
+
+__all__ = ["dtm", "height_above_ground", "ground_mask_of", "cloud_crs"]
+
+GROUND_CLASS = 2
+
+
+def cloud_crs(cloud: PointCloud) -> dict[str, Any] | None:
+    """``{"wkt", "epsg", "geographic"}`` from a LAS header, else ``None``."""
+    header = cloud.header
+    if header is None:
+        return None
+    try:
+        from ..io import las
+
+        if not isinstance(header, las.LasHeader):
+            return None
+        info = las.crs_info(header)
+    except Exception:  # a header we cannot read must not stop the DTM
+        return None
+    if not info:
+        return None
+    return {"wkt": info.get("wkt"), "epsg": info.get("epsg"), "geographic": bool(info.get("geographic"))}
+
+
+def ground_mask_of(cloud: PointCloud, ground: Any = None) -> np.ndarray:
+    """The ground mask: ``ground`` itself (bool, length n) or ``classification == 2``."""
+    if ground is None:
+        if "classification" not in cloud:
+            raise LidarfxError(
+                "no ground given and the cloud has no classification; "
+                "run classify_ground (lidarfx ground) first or pass a ground mask"
+            )
+        return np.asarray(cloud["classification"]) == GROUND_CLASS
+    mask = np.asarray(ground)
+    if mask.dtype != bool or mask.shape != (len(cloud),):
+        raise LidarfxError(f"ground must be a boolean mask of length {len(cloud)}, got {mask.dtype} {mask.shape}")
+    return mask
+
+
+def _as_cloud(source: Any) -> tuple[np.ndarray, np.ndarray | None, PointCloud | None]:
+    if isinstance(source, PointCloud):
+        return source.xyz, None, source
+    arr = np.asarray(source, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise LidarfxError(f"expected a PointCloud or an (n, 3) array of ground points, got shape {arr.shape}")
+    return arr, np.ones(len(arr), dtype=bool), None
+
+
+def dtm(
+    source: Any,
+    resolution: float = 1.0,
+    *,
+    ground: Any = None,
+    bounds: tuple[float, float, float, float] | None = None,
+    crs: dict[str, Any] | None = None,
+) -> Raster:
+    """DTM raster by linear (TIN) interpolation of the ground points at the cell centres.
+
+    Parameters
+    ----------
+    source:
+        A :class:`~lidarfx.PointCloud` (ground = ``ground`` mask, default its
+        class 2 points; the raster covers the whole cloud) or an ``(n, 3)``
+        array that holds ground points only (the raster covers them).
+    resolution:
+        Cell edge in map units (default 1.0).
+    ground:
+        Boolean ground mask for a PointCloud source.
+    bounds:
+        ``(xmin, ymin, xmax, ymax)`` to cover instead of the points' extent.
+    crs:
+        CRS dict (``wkt``/``epsg``) for the raster; default: from the LAS header.
+
+    Returns
+    -------
+    Raster
+        Grid aligned to multiples of ``resolution`` (so adjacent tiles line
+        up), row 0 = north.  A cell is the TIN height at its centre; cells
+        outside the convex hull of the ground points take the height of the
+        nearest ground point (so every cell has a value).
+    """
+    if not (resolution > 0 and math.isfinite(resolution)):
+        raise LidarfxError(f"resolution must be a positive number, got {resolution!r}")
+    xyz, mask, cloud = _as_cloud(source)
+    if cloud is not None:
+        mask = ground_mask_of(cloud, ground)
+        if crs is None:
+            crs = cloud_crs(cloud)
+    assert mask is not None
+    g = xyz[mask]
+    if len(g) == 0:
+        raise LidarfxError("no ground points: cannot build a DTM (classify the ground first)")
+    if bounds is None:
+        lo = xyz.min(axis=0)[:2]
+        hi = xyz.max(axis=0)[:2]
+    else:
+        lo = np.array(bounds[:2], dtype=np.float64)
+        hi = np.array(bounds[2:], dtype=np.float64)
+        if not np.all(hi >= lo):
+            raise LidarfxError(f"bounds must be (xmin, ymin, xmax, ymax), got {bounds!r}")
+    r = float(resolution)
+    x0 = math.floor(lo[0] / r) * r
+    y0 = math.floor(lo[1] / r) * r
+    cols = max(1, int(math.floor((hi[0] - x0) / r)) + 1)
+    rows = max(1, int(math.floor((hi[1] - y0) / r)) + 1)
+    if rows * cols > 400_000_000:
+        raise LidarfxError(f"DTM of {rows} x {cols} cells is too large; use a coarser resolution or tiles")
+    ytop = y0 + rows * r
+    # local frame: origin at the south-west corner of the grid
+    cx = (np.arange(cols) + 0.5) * r
+    cy = ytop - y0 - (np.arange(rows) + 0.5) * r  # row 0 = north
+    qx, qy = np.meshgrid(cx, cy)
+    zref = float(g[:, 2].min())
+    vals = tin_interpolate(
+        np.column_stack([g[:, 0] - x0, g[:, 1] - y0]),
+        g[:, 2] - zref,
+        np.column_stack([qx.ravel(), qy.ravel()]),
+    )
+    array = (vals + zref).reshape(rows, cols).astype(np.float32)
+    return Raster(array, (x0, ytop), r, crs, meta={"ground_points": int(len(g)), "method": "tin"})
+
+
+def height_above_ground(cloud: Any, ground: Any = None) -> np.ndarray:
+    """Height of every point above the ground surface under it (float32, metres).
+
+    Parameters
+    ----------
+    cloud:
+        A :class:`~lidarfx.PointCloud` (or an ``(n, 3)`` array, then
+        ``ground`` must be given).
+    ground:
+        ``None`` → the cloud's class 2 points; a boolean mask of ground points;
+        or a :class:`Raster` DTM (sampled bilinearly).
+
+    The ground surface is the Delaunay TIN of the ground points (linear
+    interpolation in the triangle under the point); outside the convex hull of
+    the ground points the nearest ground point's height is used.  Ground
+    points themselves get ≈ 0.  NaN everywhere when there is no ground point.
+    """
+    if isinstance(cloud, PointCloud):
+        xyz = cloud.xyz
+    else:
+        xyz = np.asarray(cloud, dtype=np.float64)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise LidarfxError(f"expected a PointCloud or an (n, 3) array, got shape {xyz.shape}")
+        if ground is None:
+            raise LidarfxError("height_above_ground of a bare array needs a ground mask or a DTM raster")
+    if isinstance(ground, Raster):
+        return (xyz[:, 2] - ground.sample(xyz[:, 0], xyz[:, 1])).astype(np.float32)
+    if isinstance(cloud, PointCloud):
+        mask = ground_mask_of(cloud, ground)
+    else:
+        mask = np.asarray(ground)
+        if mask.dtype != bool or mask.shape != (len(xyz),):
+            raise LidarfxError(f"ground must be a boolean mask of length {len(xyz)}")
+    if not mask.any():
+        return np.full(len(xyz), np.nan, dtype=np.float32)
+    origin = xyz.min(axis=0)
+    local = xyz - origin
+    surf = tin_interpolate(local[mask, :2], local[mask, 2], local[:, :2])
+    return (local[:, 2] - surf).astype(np.float32)
