@@ -105,8 +105,8 @@ def make_terrain(n: int, seed: int):
     x = rng.uniform(0.0, side, n)
     y = rng.uniform(0.0, side, n)
     z = (
-        2.0 * np.sin(2 * np.pi * x / 37.0) * np.cos(2 * np.pi * y / 53.0)  # hills, slopes up to ~20°
-        + 0.5 * np.sin(2 * np.pi * (x + y) / 11.0)  # shorter waves
+        2.0 * np.sin(2 * np.pi * x / 37.0) * np.cos(2 * np.pi * y / 53.0)  # hills
+        + 0.5 * np.sin(2 * np.pi * (x + y) / 11.0)  # shorter waves (slopes up to ~35°, median ~16°)
         + 0.01 * x  # a gentle regional tilt
         + rng.normal(0.0, 0.02, n)  # 2 cm noise
     )

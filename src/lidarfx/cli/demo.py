@@ -82,6 +82,7 @@ def run(args) -> int:
         ["classification", "planarity_r0.50", "verticality_r0.50", "linearity_r0.10"],
         out / "facade_features.png",
         view="front",
+        labels={"classification": code_name},
         title="lidarfx demo: synthetic facade, classes and features (front view)",
     )
     summary = {

@@ -24,13 +24,15 @@ def feature_views(
     view: str = "front",
     max_points: int = 200_000,
     title: str | None = None,
+    labels: dict[str, dict[int, str]] | None = None,
     seed: int = 0,
 ) -> Path:
     """Save a PNG with one panel per attribute, points coloured by value, seen from ``view``.
 
     Float attributes use a continuous colour map clipped to their 2–98 %
     range (NaN in grey); integer attributes (classes, ids) a categorical one.
-    Points are drawn far to near so the nearest lie on top.
+    Points are drawn far to near so the nearest lie on top.  ``labels`` names
+    the values of categorical attributes, e.g. ``{"classification": {2: "ground"}}``.
     """
     import matplotlib
 
@@ -55,10 +57,12 @@ def feature_views(
     for ax, name in zip(axes[:, 0], names):
         v = np.asarray(cloud[name])[idx]
         if v.dtype.kind in "iub":
+            names = (labels or {}).get(name, {})
             cats, codes = np.unique(v, return_inverse=True)
             sc = ax.scatter(xyz[:, a], xyz[:, b], c=codes, s=0.3, cmap="tab10", vmin=0, vmax=9, linewidths=0)
             handles = [
-                plt.Line2D([], [], marker="o", ls="", color=plt.cm.tab10(i % 10), label=str(c)) for i, c in enumerate(cats)
+                plt.Line2D([], [], marker="o", ls="", color=plt.cm.tab10(i % 10), label=names.get(int(c), str(c)))
+                for i, c in enumerate(cats)
             ]
             ax.legend(handles=handles, title=name, fontsize=6, title_fontsize=7, loc="upper right", markerscale=0.8)
         else:

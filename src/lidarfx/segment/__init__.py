@@ -17,9 +17,10 @@ DEFAULTS: dict[str, Any] = {
     "max_distance": 0.10,  # maximaler Abstand zum Flächensegment
     "growing_radius": 0.15,  # Suchradius zur Flächenverdichtung (region growing)
     "max_angle": 15.0,  # maximale Abweichung vom Normalvektor [deg]
-    "min_size": 30,
+    "min_size": 30,  # smaller segments are released
+    "min_width": 0.0,  # narrower segments are released (0 = off)
 }
-"""The LIS defaults (dense TLS) and the minimum segment size."""
+"""The LIS defaults (dense TLS), the minimum segment size and width."""
 
 TABLE_COLUMNS = [
     "id",

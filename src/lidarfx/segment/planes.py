@@ -20,9 +20,10 @@ Algorithm
    every time it grew by ``refit_fraction`` (at most every ``refit_max``
    points).  A refit whose in-plane spread is not clearly larger than the
    out-of-plane spread (λ2 < 4 λ3: collinear members) keeps the previous plane.
-5. A finished segment smaller than ``min_size`` is released: its points go
-   back to −1, may be absorbed by a later segment growing into them, but are
-   never used as seeds again (this keeps the run O(n) and deterministic).
+5. A finished segment smaller than ``min_size`` (or, optionally, narrower
+   than ``min_width``) is released: its points go back to −1, may be absorbed
+   by a later segment growing into them, but are never used as seeds again
+   (this keeps the run O(n) and deterministic).
 6. Segment ids are renumbered by decreasing size (0 = largest; equal sizes
    keep their creation order).
 
@@ -71,7 +72,7 @@ def _grow(
     nrm,  # (n, 3) unit normals in sorted order
     seeds,  # sorted positions, in seed order
     r_grow, dmax, cos_max,
-    min_size, first_refit, refit_fraction, refit_max,
+    min_size, min_width, first_refit, refit_fraction, refit_max,
     nbuf,
     label,  # (n,) int64 in sorted order: _FREE / _NO_NORMAL on entry; segment (creation order) on exit
     sizes,  # (n,) int64 out: size per created segment
@@ -158,7 +159,13 @@ def _grow(
                         if lam[1] > 4.0 * lam[2] and np.isfinite(lam[2]):
                             ux, uy, uz = v3[0], v3[1], v3[2]
                             cx, cy, cz = ox + mx, oy + my, oz + mz
-        if tail < min_size:
+        release = tail < min_size
+        if not release and min_width > 0.0:
+            # equivalent width of the segment: sqrt(12 λ2) (a w-wide strip has λ2 = w²/12)
+            inv = 1.0 / tail
+            eigh3(sxx * inv, sxy * inv, sxz * inv, syy * inv, syz * inv, szz * inv, lam, v1, v3, work)
+            release = 12.0 * lam[1] < min_width * min_width
+        if release:
             for t in range(tail):
                 label[queue[t]] = -2
         else:
@@ -192,6 +199,7 @@ def segment_planes(
     growing_radius: float = DEFAULTS["growing_radius"],
     max_angle: float = DEFAULTS["max_angle"],
     min_size: int = DEFAULTS["min_size"],
+    min_width: float = DEFAULTS["min_width"],
     scanner: Sequence[float] | None = None,
     first_refit: int = 10,
     refit_fraction: float = 0.10,
@@ -220,6 +228,12 @@ def segment_planes(
         the segment normal (LIS "maximale Abweichung vom Normalvektor", 15°).
     min_size:
         Segments with fewer points are released (their points get −1).
+    min_width:
+        Segments whose equivalent width √(12·λ2) (λ2 = the smaller in-plane
+        variance of the segment) is below this (m) are released too.  This
+        removes the thin strips of intermediate normals that grow along
+        edges; 0 (default) switches the test off.  A good value is about the
+        growing radius.
     scanner:
         Scanner position (x, y, z) passed to the normal computation (TLS);
         the growing itself compares normals axially, so it only matters for
@@ -249,6 +263,8 @@ def segment_planes(
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("segment_planes expects a PointCloud (see lidarfx.read)")
     _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, refit_fraction, first_refit)
+    if not (math.isfinite(min_width) and min_width >= 0):
+        raise LidarfxError(f"min_width must be a number >= 0 (m), got {min_width!r}")
     if int(refit_max) < 1:
         raise LidarfxError(f"refit_max must be >= 1, got {refit_max!r}")
     n = len(cloud)
@@ -284,7 +300,7 @@ def segment_planes(
     sizes = np.zeros(n, np.int64)
     nseg = _grow(
         *g, nrm, seeds, growing_radius, float(max_distance), math.cos(math.radians(float(max_angle))),
-        int(min_size), int(first_refit), float(refit_fraction), int(refit_max),
+        int(min_size), float(min_width), int(first_refit), float(refit_fraction), int(refit_max),
         ring_buffer_size(growing_radius, g.cell), label, sizes,
     )
     sizes = sizes[:nseg]
@@ -313,6 +329,7 @@ def segment_planes(
             "growing_radius": growing_radius,
             "max_angle": float(max_angle),
             "min_size": int(min_size),
+            "min_width": float(min_width),
             "scanner": None if scanner is None else [float(v) for v in scanner],
             "first_refit": int(first_refit),
             "refit_fraction": float(refit_fraction),

@@ -1,0 +1,94 @@
+"""``lidarfx features`` and ``lidarfx demo`` from the command line."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import laspy
+import numpy as np
+import pytest
+
+import lidarfx
+from lidarfx.cli import main
+from lidarfx.features import compute_features
+
+
+@pytest.fixture(scope="module")
+def scene_las(tmp_path_factory):
+    path = tmp_path_factory.mktemp("fx") / "plane.las"
+    cloud = lidarfx.synth.plane(2.0, density=400.0, noise=0.005, seed=2, origin=(500000.0, 5000000.0, 200.0))
+    lidarfx.write(cloud, path)
+    return path
+
+
+def test_features_cli_writes_float32_extra_dims(scene_las, tmp_path, capsys):
+    out = tmp_path / "out.las"
+    rc = main(["features", str(scene_las), str(out), "-r", "0.5", "--features", "eigen,plane,density", "--json"])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out)
+    las = laspy.read(out)
+    extra = {d.name: d.dtype for d in las.point_format.extra_dimensions}
+    assert set(summary["features"]) <= set(extra)
+    assert all(np.dtype(extra[n]) == np.float32 for n in summary["features"])
+    ref = compute_features(lidarfx.read(scene_las), "eigen,plane,density", radius=0.5)
+    for name in ("planarity", "slope", "echo_ratio_slope"):
+        np.testing.assert_array_equal(np.asarray(las[name]), ref[name])
+    # a noisy horizontal plane: planar and flat
+    assert np.nanmedian(las["planarity"]) > 0.7 and np.nanmedian(las["slope"]) < 2.0
+    assert summary["points"] == len(las.points) and summary["seconds"]["features"] >= 0
+
+
+def test_features_cli_multiscale_names(scene_las, tmp_path):
+    out = tmp_path / "multi.laz"
+    assert main(["features", str(scene_las), str(out), "-r", "0.3", "-r", "0.6", "-f", "planarity", "-q"]) == 0
+    names = {d.name for d in laspy.read(out).point_format.extra_dimensions}
+    assert {"planarity_r0.30", "planarity_r0.60"} <= names
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["-r", "0.5", "--features", "planarty"], "unknown feature 'planarty'"),
+        (["--features", "eigen"], "give a radius"),
+        (["-r", "-1"], "radii must be positive"),
+        (["-n", "knn"], "k >= 1"),
+    ],
+)
+def test_features_cli_errors(scene_las, tmp_path, capsys, args, message):
+    out = tmp_path / "bad.las"
+    assert main(["features", str(scene_las), str(out), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert not out.exists() and not list(tmp_path.glob(".bad*"))
+
+
+def test_features_cli_refuses_to_overwrite_input(scene_las, capsys):
+    before = scene_las.read_bytes()
+    assert main(["features", str(scene_las), str(scene_las), "-r", "0.5"]) == 2
+    assert scene_las.read_bytes() == before
+
+
+def test_features_list_and_subprocess_exit_code(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "lidarfx", "features", "--list"], capture_output=True, text=True)
+    assert res.returncode == 0 and "planarity" in res.stdout and "echo_ratio_slope" in res.stdout
+    res = subprocess.run(
+        [sys.executable, "-m", "lidarfx", "features", str(tmp_path / "missing.laz"), str(tmp_path / "o.laz"), "-r", "1"],
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 2 and "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_demo_writes_its_outputs(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == 0
+    for name in ("facade.laz", "facade_features.laz", "facade_features.png", "summary.json"):
+        assert (out / name).stat().st_size > 0
+    summary = json.loads((out / "summary.json").read_text())
+    per = summary["per_class_r0.50"]
+    # the features separate the facade classes: walls are vertical planes, vegetation is scattered
+    assert per["wall"]["verticality"] > 0.9 and per["ground"]["verticality"] < 0.05
+    assert per["wall"]["planarity"] > per["vegetation"]["planarity"] + 0.2
+    assert per["vegetation"]["sphericity"] > 5 * per["wall"]["sphericity"]
+    assert "planarity_r0.10" in summary["features"]
