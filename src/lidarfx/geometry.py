@@ -7,7 +7,6 @@ rule).  Normals are flipped up before converting.
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np

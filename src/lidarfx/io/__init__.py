@@ -19,19 +19,19 @@ Format modules are imported on first use so ``lidarfx --help`` stays fast.
 """
 from __future__ import annotations
 
-import contextlib
 import importlib
 import inspect
 import os
-import sys
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from .._atomic import atomic_path, check_not_same_file
 from ..cloud import PointCloud
 from ..errors import LidarfxError
+from ..progress import bar as _bar
+from ..progress import wanted as _wanted
 
 __all__ = ["read", "write", "info", "FORMATS", "ASPRS_CLASSES", "progress_bar"]
 
@@ -111,30 +111,9 @@ def _one_line(exc: BaseException) -> str:
     return text if len(text) <= 200 else text[:197] + "..."
 
 
-@contextlib.contextmanager
-def progress_bar(total: int, description: str, enabled: bool | None) -> Iterator[Callable[[int], None]]:
-    """Yield an ``advance(n_points)`` callable, drawing a rich progress bar on stderr.
-
-    ``enabled=None`` means automatic: a bar only when ``total`` exceeds
-    :data:`AUTO_PROGRESS_POINTS` and stderr is a terminal.
-    """
-    if enabled is None:
-        enabled = total > AUTO_PROGRESS_POINTS and sys.stderr.isatty()
-    if not enabled:
-        yield lambda n: None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-    columns = (
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed:,}/{task.total:,} pts"),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task(description, total=total)
-        yield lambda n: bar.advance(task, n)
+def progress_bar(total: int, description: str, enabled: bool | None):
+    """``lidarfx.progress.bar`` for reading/writing ``total`` points (automatic: large files on a terminal)."""
+    return _bar(description, total, _wanted(enabled, total, threshold=AUTO_PROGRESS_POINTS))
 
 
 def _normalise_columns(columns: str | Sequence[str] | None) -> list[str] | None:

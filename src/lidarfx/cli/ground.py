@@ -1,0 +1,281 @@
+"""``lidarfx ground``, ``lidarfx ground-eval`` and ``lidarfx dtm``: ground filter, its accuracy, DTM rasters."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+GROUND_EPILOG = """examples:
+  lidarfx ground in.laz out.laz                        # class 2 = ground, 1 = other (noise 7/18 kept)
+  lidarfx ground in.laz out.laz --hag --dtm dtm.tif    # + height_above_ground attribute + 1 m DTM
+  lidarfx ground in.laz out.laz --slope 0.2 --window 24 --json
+
+Method: SMRF (Pingel, Clarke & McBride 2013) with one default parameter set
+tuned on the ISPRS filter-test samples (docs/ground.md).  Only last returns
+are used where return numbers exist; classes 7, 18 and 66 are ignored and keep
+their class.  Every other point is set to 2 (ground) or 1 (unclassified).
+"""
+
+EVAL_EPILOG = """examples:
+  lidarfx ground-eval samp11-utm.laz --reference-class 2
+  lidarfx ground-eval samp*-utm.laz --json              # every file + the mean
+
+The reference is the file's own classification (REFERENCE_CLASS = ground,
+every other class = object); the filter sees only x, y, z and the return
+numbers.  Points of --ignore-classes are removed before filtering and scoring.
+Errors as in Sithole & Vosselman (2004): type I = ground rejected / ground,
+type II = object accepted / object, total = misclassified / all points.
+"""
+
+DTM_EPILOG = """examples:
+  lidarfx dtm ground.laz dtm.tif                 # from the class 2 points, 1 m cells
+  lidarfx dtm in.laz dtm.tif --classify -r 0.5   # run the ground filter first
+  lidarfx dtm ground.laz dtm.asc                 # ESRI ASCII grid (+ .prj)
+
+GeoTIFF is written with rasterio when installed, else by the built-in writer
+(uncompressed float32 + GeoTIFF keys + .tfw world file).  The DTM is the
+linear TIN of the ground points sampled at the cell centres; cells outside
+their convex hull take the nearest ground height.
+"""
+
+
+def _int_list(text: str) -> list[int]:
+    text = text.strip()
+    if not text or text.lower() == "none":
+        return []
+    try:
+        return [int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated class codes, got {text!r}") from None
+
+
+def _add_params(p) -> None:
+    from ..ground import DEFAULTS, IGNORE_CLASSES
+
+    g = p.add_argument_group("SMRF parameters (defaults: the tuned set, docs/ground.md)")
+    g.add_argument("--cell", type=float, default=DEFAULTS["cell"], help="grid cell (m), default %(default)s")
+    g.add_argument("--slope", type=float, default=DEFAULTS["slope"], help="opening slope (rise/run), default %(default)s")
+    g.add_argument("--window", type=float, default=DEFAULTS["window"], help="largest opening radius (m), default %(default)s")
+    g.add_argument("--threshold", type=float, default=DEFAULTS["threshold"], help="final elevation threshold (m), default %(default)s")
+    g.add_argument("--scalar", type=float, default=DEFAULTS["scalar"], help="threshold per unit DTM slope (m), default %(default)s")
+    g.add_argument("--all-returns", action="store_true", help="use every return, not only last returns")
+    g.add_argument(
+        "--ignore-classes",
+        type=_int_list,
+        default=list(IGNORE_CLASSES),
+        help="classes never used nor made ground (default %s; 'none' for none)" % ",".join(map(str, IGNORE_CLASSES)),
+    )
+
+
+def _params(args) -> dict:
+    return {
+        "cell": args.cell,
+        "slope": args.slope,
+        "window": args.window,
+        "threshold": args.threshold,
+        "scalar": args.scalar,
+        "last_returns": not args.all_returns,
+    }
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "ground",
+        help="classify ground points (SMRF); optional DTM and height above ground",
+        description="Classify ground points (class 2) of ALS data with SMRF and write the cloud.",
+        epilog=GROUND_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("input", help="input point cloud")
+    p.add_argument("output", help="output point cloud (format from the extension)")
+    _add_params(p)
+    p.add_argument("--hag", action="store_true", help="add the height_above_ground attribute")
+    p.add_argument("--dtm", default=None, metavar="RASTER", help="also write a DTM raster (.tif or .asc)")
+    p.add_argument("-r", "--resolution", type=float, default=1.0, help="DTM cell (map units), default 1.0")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
+    p.set_defaults(func=run_ground)
+
+    e = sub.add_parser(
+        "ground-eval",
+        help="type I / II / total error of the ground filter against a reference class",
+        description="Evaluate the ground filter against the files' own reference classification.",
+        epilog=EVAL_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    e.add_argument("inputs", nargs="+", metavar="IN", help="labelled point cloud(s)")
+    e.add_argument("--reference-class", type=int, default=2, help="ground class of the reference (default 2)")
+    _add_params(e)
+    e.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    e.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    e.set_defaults(func=run_eval)
+
+    d = sub.add_parser(
+        "dtm",
+        help="DTM raster (GeoTIFF / ESRI ASCII) from ground points",
+        description="Write a DTM raster interpolated (TIN) from the ground points of a cloud.",
+        epilog=DTM_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    d.add_argument("input", help="input point cloud")
+    d.add_argument("output", help="output raster (.tif, .tiff or .asc)")
+    d.add_argument("-r", "--resolution", type=float, default=1.0, help="cell (map units), default 1.0")
+    d.add_argument("--classify", action="store_true", help="run the ground filter first (else class 2 is ground)")
+    _add_params(d)
+    d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    d.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
+    d.set_defaults(func=run_dtm)
+
+
+def _check_raster_path(path: str) -> None:
+    from pathlib import Path
+
+    from ..errors import LidarfxError
+    from ..ground.raster import RASTER_EXTENSIONS
+
+    if Path(path).suffix.lower() not in RASTER_EXTENSIONS:
+        raise LidarfxError(f"{path}: DTM output must end in {', '.join(RASTER_EXTENSIONS)}")
+
+
+def run_ground(args) -> int:
+    from .. import io
+    from .._atomic import check_not_same_file
+    from ..ground import apply_ground_classification, classify_ground, dtm, height_above_ground
+
+    check_not_same_file(args.input, args.output)
+    if args.dtm:
+        _check_raster_path(args.dtm)
+    progress = False if args.quiet else None
+    t0 = time.perf_counter()
+    cloud = io.read(args.input, progress=progress)
+    t1 = time.perf_counter()
+    mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **_params(args))
+    out = apply_ground_classification(cloud, mask, ignore_classes=args.ignore_classes)
+    t2 = time.perf_counter()
+    if args.hag:
+        out["height_above_ground"] = height_above_ground(out, mask)
+    raster = None
+    if args.dtm:
+        if not mask.any():
+            from ..errors import LidarfxError
+
+            raise LidarfxError("no ground point found: no DTM written")
+        raster = dtm(out, args.resolution, ground=mask)
+    t3 = time.perf_counter()
+    io.write(out, args.output, progress=progress)
+    if raster is not None:
+        raster.write(args.dtm)
+    t4 = time.perf_counter()
+    summary = {
+        "input": args.input,
+        "output": args.output,
+        "points": len(out),
+        "ground_points": int(mask.sum()),
+        "ground_share": round(float(mask.mean()), 6) if len(out) else None,
+        "parameters": {**_params(args), "ignore_classes": args.ignore_classes},
+        "dtm": None if raster is None else {"path": args.dtm, "shape": list(raster.shape), "resolution": raster.resolution},
+        "seconds": {
+            "read": round(t1 - t0, 3),
+            "classify": round(t2 - t1, 3),
+            "hag_dtm": round(t3 - t2, 3),
+            "write": round(t4 - t3, 3),
+        },
+    }
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2)
+        print()
+    elif not args.quiet:
+        print(
+            f"{len(out):,} points, {int(mask.sum()):,} ground -> {args.output}"
+            + (f", DTM {raster.shape[1]}x{raster.shape[0]} -> {args.dtm}" if raster is not None else "")
+            + f" (classify {t2 - t1:.2f} s)",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict, progress=None) -> dict:
+    """Read ``path``, hide its classes from the filter, score against ``reference_class``."""
+    import numpy as np
+
+    from .. import io
+    from ..cloud import PointCloud
+    from ..errors import LidarfxError
+    from ..ground import classify_ground, ground_errors
+
+    cloud = io.read(path, progress=progress)
+    if "classification" not in cloud:
+        raise LidarfxError(f"{path}: no classification to use as reference")
+    cls = np.asarray(cloud["classification"])
+    keep = ~np.isin(cls, list(ignore_classes or []))
+    attrs = {k: cloud[k][keep] for k in ("return_number", "number_of_returns") if k in cloud}
+    bare = PointCloud(cloud.xyz[keep], attrs)  # xyz and returns only: no classes
+    t0 = time.perf_counter()
+    pred = classify_ground(bare, ignore_classes=None, progress=progress, **params)
+    sec = time.perf_counter() - t0
+    res = ground_errors(pred, cls[keep] == reference_class)
+    res.update(file=path, ignored_points=int((~keep).sum()), seconds=round(sec, 3))
+    return res
+
+
+def run_eval(args) -> int:
+    import numpy as np
+
+    progress = False if args.quiet else None
+    params = _params(args)
+    rows = [evaluate_file(f, args.reference_class, args.ignore_classes, params, progress) for f in args.inputs]
+    mean = {k: float(np.mean([r[k] for r in rows])) for k in ("type_i", "type_ii", "total")}
+    if args.json:
+        json.dump(
+            {"reference_class": args.reference_class, "parameters": {**params, "ignore_classes": args.ignore_classes},
+             "files": rows, "mean": mean},
+            sys.stdout,
+            indent=2,
+        )
+        print()
+        return 0
+    print(f"{'file':40s} {'points':>8s} {'type I %':>9s} {'type II %':>9s} {'total %':>8s}")
+    for r in rows:
+        print(f"{r['file'][-40:]:40s} {r['n_points']:8d} {100 * r['type_i']:9.2f} {100 * r['type_ii']:9.2f} {100 * r['total']:8.2f}")
+    if len(rows) > 1:
+        print(f"{'mean':40s} {'':8s} {100 * mean['type_i']:9.2f} {100 * mean['type_ii']:9.2f} {100 * mean['total']:8.2f}")
+    return 0
+
+
+def run_dtm(args) -> int:
+    from .. import io
+    from ..errors import LidarfxError
+    from ..ground import classify_ground, dtm
+
+    _check_raster_path(args.output)
+    progress = False if args.quiet else None
+    t0 = time.perf_counter()
+    cloud = io.read(args.input, progress=progress)
+    if args.classify:
+        mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **_params(args))
+    else:
+        if "classification" not in cloud:
+            raise LidarfxError(f"{args.input}: no classification; use --classify to run the ground filter")
+        mask = cloud["classification"] == 2
+    if not mask.any():
+        raise LidarfxError(f"{args.input}: no ground points (class 2); use --classify")
+    raster = dtm(cloud, args.resolution, ground=mask)
+    raster.write(args.output)
+    sec = time.perf_counter() - t0
+    summary = {
+        "input": args.input,
+        "output": args.output,
+        "ground_points": int(mask.sum()),
+        "shape": list(raster.shape),
+        "resolution": raster.resolution,
+        "origin": list(raster.origin),
+        "epsg": (raster.crs or {}).get("epsg"),
+        "seconds": round(sec, 3),
+    }
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2)
+        print()
+    elif not args.quiet:
+        print(f"DTM {raster.shape[1]}x{raster.shape[0]} cells of {raster.resolution} -> {args.output}", file=sys.stderr)
+    return 0
