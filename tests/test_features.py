@@ -230,12 +230,13 @@ def test_utm_shift_gives_identical_features():
 def test_multiscale_equals_separate_runs():
     xyz = scene()
     cloud = PointCloud(xyz)
-    multi = compute_features(cloud, ["eigen", "plane", "density", "height", "histogram"], radii=[0.25, 0.5, 1.0])
+    groups = ["eigen", "plane", "density", "height", "histogram", "distribution", "curvature", "count"]
+    multi = compute_features(cloud, groups, radii=[0.25, 0.5, 1.0])
     for r in (0.25, 0.5, 1.0):
-        single = compute_features(cloud, ["eigen", "plane", "density", "height", "histogram"], radius=r)
+        single = compute_features(cloud, groups, radius=r)
         for name in single.meta["features"]:
             # omnivariance is a cube root: rounding noise of λ3 ≈ 0 (1e-17·λ1) shows as 1e-6
-            atol = 1e-5 if name == "omnivariance" else 1e-6
+            atol = {"omnivariance": 1e-5, "k1": 1e-4, "k2": 1e-4, "mean_curvature": 1e-4, "gauss_curvature": 1e-4}.get(name, 1e-6)
             np.testing.assert_allclose(multi[f"{name}_r{r:.2f}"], single[name], rtol=1e-5, atol=atol, err_msg=name)
 
 
@@ -333,17 +334,25 @@ def test_cloudcompare_convention_matches_jakteristics_raw_eigenvalues():
 
 
 def test_pdal_convention_matches_pgeof():
+    """√λ ratios as pgeof computes them; pgeof adds ε = 1e-3 m to its denominators (include/pca.hpp)."""
     pgeof = pytest.importorskip("pgeof")
     from lidarfx.neighbors import NeighborIndex
 
     xyz = scene(n=3000)
-    idx = NeighborIndex(xyz, 0.5)
-    off, nn, _ = idx.query_radius(xyz, 0.5)
+    off, nn, _ = NeighborIndex(xyz, 0.5).query_radius(xyz, 0.5)
     theirs = pgeof.compute_features(xyz.astype(np.float32), nn.astype(np.uint32), off.astype(np.uint32), k_min=3)
-    ours = compute_features(PointCloud(xyz), ["linearity", "planarity", "sphericity"], radius=0.5, convention="pdal")
-    ok = np.diff(off) >= 3
-    for c, name in enumerate(["linearity", "planarity", "sphericity"]):
-        np.testing.assert_allclose(ours[name][ok], theirs[ok, c], atol=2e-4, err_msg=name)
+    names = ["linearity", "planarity", "sphericity"]
+    ours = compute_features(PointCloud(xyz), names + ["eigenvalue1"], radius=0.5, convention="pdal")
+    # pgeof works in float32: √λ3 of a 3-point neighbourhood (λ3 = 0) is noise of ~3e-4 there
+    ok = np.diff(off) >= 6
+    mu1 = np.sqrt(ours["eigenvalue1"][ok].astype(float))
+    for c, name in enumerate(names):
+        np.testing.assert_allclose(ours[name][ok] * mu1 / (mu1 + 1e-3), theirs[ok, c], atol=2e-5, err_msg=name)
+
+
+def test_radii_that_would_share_a_name_are_refused():
+    with pytest.raises(LidarfxError, match="same attribute suffix"):
+        compute_features(PointCloud(scene(n=300)), "planarity", radii=[0.12, 0.121])
 
 
 # --------------------------------------------------------------------------- API

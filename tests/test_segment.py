@@ -67,8 +67,8 @@ def house_cloud():
 
 @pytest.fixture(scope="module")
 def house_seg(house_cloud):
-    # min_size for this density (400 pts/m²): 150 points = 0.375 m²
-    return segment_planes(house_cloud, min_size=150)
+    # min_width = the growing radius releases the thin strips of intermediate normals along edges
+    return segment_planes(house_cloud, min_width=0.15)
 
 
 def _dominant(ids: np.ndarray) -> tuple[int, float]:
@@ -120,8 +120,15 @@ def test_house_table_orientations(house_cloud, house_seg):
         assert r["area"] == pytest.approx(area, rel=0.03)
 
 
-def test_house_default_min_size_only_adds_small_edge_strips(house_cloud):
-    seg = segment_planes(house_cloud)  # default min_size = 30
+def test_house_min_size_for_the_density_also_gives_exactly_its_planes(house_cloud, house_seg):
+    # instead of min_width: a min_size for this density (400 pts/m²): 150 points = 0.375 m²
+    sid = segment_planes(house_cloud, min_size=150)["segment_id"]
+    assert sid.max() + 1 == 6
+    assert np.array_equal(sid, house_seg["segment_id"])
+
+
+def test_house_defaults_only_add_small_edge_strips(house_cloud):
+    seg = segment_planes(house_cloud)  # default min_size = 30, no min_width
     sid, truth = seg["segment_id"], house_cloud["plane"]
     for k in range(6):
         s, share = _dominant(sid[truth == k])
@@ -141,10 +148,10 @@ def test_ids_by_decreasing_size_and_dtypes(house_seg):
 
 
 def test_deterministic_and_utm_safe(house_cloud, house_seg):
-    again = segment_planes(house_cloud, min_size=150)
+    again = segment_planes(house_cloud, min_width=0.15)
     assert np.array_equal(again["segment_id"], house_seg["segment_id"])
     shifted = house(origin=(500_000.0, 5_400_000.0, 300.0))
-    s2 = segment_planes(shifted, min_size=150)
+    s2 = segment_planes(shifted, min_width=0.15)
     same = (s2["segment_id"] == house_seg["segment_id"]).mean()
     assert same > 0.999
     r0, r1 = segments_table(house_seg)[0], segments_table(s2)[0]
@@ -231,6 +238,18 @@ def test_small_segments_released_and_isolated_points_unsegmented():
     assert segment_planes(c, min_size=10)["segment_id"][len(big) : len(big) + len(tiny)].max() == 1
 
 
+def test_min_width_releases_thin_strips():
+    rng = np.random.default_rng(11)
+    wide = sample_patch(rng, (0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 2), (0, 1), 1500)
+    strip = sample_patch(rng, (0, 3, 0), (1, 0, 0), (0, 1, 0), (0, 3), (0, 0.08), 1500)  # 8 cm wide
+    c = PointCloud(np.vstack([wide, strip]))
+    kept = segment_planes(c)["segment_id"]
+    assert (kept[len(wide):] >= 0).mean() > 0.95  # width not tested by default
+    sid = segment_planes(c, min_width=0.15)["segment_id"]
+    assert (sid[:len(wide)] == 0).mean() > 0.99 and (sid[len(wide):] == -1).all()
+    assert sid.max() == 0
+
+
 @pytest.mark.parametrize(
     "kw",
     [
@@ -241,6 +260,7 @@ def test_small_segments_released_and_isolated_points_unsegmented():
         {"max_angle": 95.0},
         {"min_size": 0},
         {"min_size": 2.5},
+        {"min_width": -0.1},
     ],
 )
 def test_bad_parameters(kw):
@@ -256,7 +276,10 @@ def test_empty_or_wrong_input():
 
 
 def test_lis_defaults():
-    assert DEFAULTS == {"normal_radius": 0.10, "max_distance": 0.10, "growing_radius": 0.15, "max_angle": 15.0, "min_size": 30}
+    assert DEFAULTS == {
+        "normal_radius": 0.10, "max_distance": 0.10, "growing_radius": 0.15, "max_angle": 15.0,
+        "min_size": 30, "min_width": 0.0,
+    }
 
 
 # ------------------------------------------------------------------ real data
@@ -305,7 +328,7 @@ def test_cli_segment(tmp_path, capsys):
     assert json.loads((tmp_path / "seg.laz.segments.json").read_text())["segments"][0]["id"] == 0
     # --table stem, parameters, rich summary on stderr
     assert main(["segment", str(src), str(tmp_path / "b.laz"), "--table", str(tmp_path / "planes.csv"),
-                 "--max-angle", "10", "--min-size", "50"]) == 0
+                 "--max-angle", "10", "--min-size", "50", "--min-width", "0.15"]) == 0
     err = capsys.readouterr().err
     assert "2 plane segments" in err and "largest" in err
     assert (tmp_path / "planes.csv").exists() and (tmp_path / "planes.json").exists()

@@ -8,9 +8,10 @@ import time
 
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
+  lidarfx segment scan.laz seg.laz --min-width 0.15       # drop thin strips along edges
   lidarfx segment scan.laz seg.laz --scanner 12.5,-3.0,1.7 --min-size 100
   lidarfx segment als.laz seg.laz --normal-radius 1.5 --max-distance 0.2 \\
-      --growing-radius 1.2 --max-angle 15 --min-size 30   # ALS roofs (~3-10 pts/m²)
+      --growing-radius 1.2 --max-angle 15 --min-size 30 --min-width 1.2   # ALS roofs, ~3 pts/m²
   lidarfx segment scan.laz seg.laz --table planes --json  # planes.csv + planes.json
 
 parameters (LIS defaults, German names from the LIS slides):
@@ -19,12 +20,13 @@ parameters (LIS defaults, German names from the LIS slides):
   --growing-radius  0.15 m  Suchradius zur Flächenverdichtung (region growing)
   --max-angle       15°     maximale Abweichung vom Normalvektor
   --min-size        30      smaller segments are released (segment_id -1)
+  --min-width       0 (off) narrower segments (sqrt(12 λ2), m) are released too
 
 outputs: OUT with segment_id (int32, -1 = none, 0 = largest) and segment_size
 (int32), plus the per-segment table OUT.segments.csv and OUT.segments.json
 (id, size, centroid, normal, dip, dip direction, RMS, convex-hull area in the
 plane).  Follow up with e.g.
-  lidarfx select seg.laz roofs.laz --where "segment_size > 500 and dip < 60"
+  lidarfx select seg.laz big.laz --where "segment_id >= 0 and segment_size > 500"
 """
 
 
@@ -55,6 +57,7 @@ def register(sub) -> None:
     p.add_argument("--growing-radius", type=float, default=DEFAULTS["growing_radius"], help="neighbour radius of the growing (m), default %(default)s")
     p.add_argument("--max-angle", type=float, default=DEFAULTS["max_angle"], help="max normal deviation (degrees), default %(default)s")
     p.add_argument("--min-size", type=int, default=DEFAULTS["min_size"], help="minimum points per segment, default %(default)s")
+    p.add_argument("--min-width", type=float, default=DEFAULTS["min_width"], help="release segments narrower than this (m; sqrt(12*lambda2)); 0 = off, default %(default)s")
     p.add_argument("--scanner", type=_floats, default=None, help="scanner position x,y,z for the normals (TLS)")
     p.add_argument("--keep-features", action="store_true", help="also write normal_x/y/z and plane_std")
     p.add_argument("--table", default=None, metavar="PATH", help="table path stem: writes PATH.csv and PATH.json (default OUT.segments)")
@@ -91,6 +94,7 @@ def run(args) -> int:
         growing_radius=args.growing_radius,
         max_angle=args.max_angle,
         min_size=args.min_size,
+        min_width=args.min_width,
         scanner=args.scanner,
         keep_features=args.keep_features,
         inplace=True,

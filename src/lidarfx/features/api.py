@@ -144,6 +144,8 @@ def feature_arrays(
     else:
         rad = np.asarray(rs, dtype=np.float64).reshape(1, -1)
         names_for_scale = [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
+        if len(set(names_for_scale)) < len(names_for_scale):
+            raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii at least 0.01 m apart")
     nscale = rad.shape[1]
     kind = KIND_CYLINDER if neighbourhood == "cylinder" else KIND_SPHERE
 
@@ -237,7 +239,9 @@ def compute_features(
     convention:
         ``default`` (SPEC table), ``cloudcompare`` (raw eigenvalues in
         omnivariance / eigenentropy, as CloudCompare and jakteristics) or
-        ``pdal`` (square roots of the eigenvalues, as PDAL and pgeof).
+        ``pdal`` (square roots of the eigenvalues in the ratio features, as
+        PDAL's SQRT mode and pgeof; pgeof also adds 1e-3 to its denominators).
+        docs/features.md lists exactly what each convention reproduces.
     d_max:
         Distance to the local plane that counts as inlier (m), also the MSAC
         threshold unless ``msac_threshold`` is given.

@@ -18,7 +18,7 @@ from . import slots as S
 # conventions (see docs/features.md)
 CONV_DEFAULT = 0  # SPEC table: normalised eigenvalues for omnivariance / eigenentropy
 CONV_CLOUDCOMPARE = 1  # CloudCompare / jakteristics: raw eigenvalues for omnivariance / eigenentropy
-CONV_PDAL = 2  # PDAL / pgeof: square roots of the eigenvalues in every ratio feature
+CONV_PDAL = 2  # PDAL (SQRT mode) / pgeof: square roots of the eigenvalues in the ratio features
 CONVENTIONS = {"default": CONV_DEFAULT, "cloudcompare": CONV_CLOUDCOMPARE, "pdal": CONV_PDAL}
 
 

@@ -314,11 +314,11 @@ def point_features(
                 if want_hist and need_cyl and ncyl > 0.0:
                     histogram_features(hist, ncyl, p2[_CABV], p2[_CBLW], col, o)
                 if want_dist and n > 0.0:
-                    cnt = 0
+                    occupied = 0
                     while octbits:
-                        cnt += octbits & 1
+                        occupied += octbits & 1
                         octbits >>= 1
-                    S.put(o, col, S.OCTANT_OCCUPANCY, cnt)
+                    S.put(o, col, S.OCTANT_OCCUPANCY, occupied)
                     S.put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
                 if want_curv and plane_ok and n >= 6.0:
                     quadric_curvatures(quad, r, work, col, o)
