@@ -323,7 +323,8 @@ def test_cli_segment(tmp_path, capsys):
     assert summary["parameters"]["growing_radius"] == 0.15
     back = lidarfx.read(out)
     assert back["segment_id"].dtype == np.int32 and set(np.unique(back["segment_id"])) <= {-1, 0, 1}
-    rows = list(csv.DictReader(open(tmp_path / "seg.laz.segments.csv", newline="")))
+    with open(tmp_path / "seg.laz.segments.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
     assert len(rows) == 2
     assert json.loads((tmp_path / "seg.laz.segments.json").read_text())["segments"][0]["id"] == 0
     # --table stem, parameters, rich summary on stderr

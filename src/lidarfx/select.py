@@ -35,15 +35,16 @@ float32 attributes are compared with constants rounded to float32 (so
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from .cloud import PointCloud
 from .errors import LidarfxError
 
-__all__ = ["evaluate", "select", "parse", "names_in", "Expression"]
+__all__ = ["Expression", "evaluate", "names_in", "parse", "select"]
 
 _TOKEN = re.compile(
     r"""

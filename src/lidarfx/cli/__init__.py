@@ -64,6 +64,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("lidarfx: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `lidarfx info --json f.laz | head`: the reader left
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return int(rc or 0)
 
 

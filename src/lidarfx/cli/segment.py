@@ -80,7 +80,12 @@ def _table_paths(args) -> tuple[str, str]:
 def run(args) -> int:
     from .. import io
     from .._atomic import check_not_same_file
-    from ..segment import segment_planes, segments_table, write_segments_csv, write_segments_json
+    from ..segment import (
+        segment_planes,
+        segments_table,
+        write_segments_csv,
+        write_segments_json,
+    )
 
     check_not_same_file(args.input, args.output)
     progress = False if args.quiet else None

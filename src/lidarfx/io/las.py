@@ -64,8 +64,8 @@ READ_ERRORS = (
     OSError,
 )
 
-CHUNK_POINTS = 1 << 20
-"""Points per read/write chunk (about 30-150 MB of point records)."""
+CHUNK_POINTS = 1 << 17
+"""Points per read/write chunk (about 4-20 MB of point records: memory stays flat while writing)."""
 _BLOCK_POINTS = 1 << 15
 """Points (un)packed at a time inside a chunk: field-by-field strided access stays in the CPU cache."""
 

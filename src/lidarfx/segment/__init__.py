@@ -40,7 +40,14 @@ TABLE_COLUMNS = [
 
 _LAZY = ("segment_planes", "segments_table", "write_segments_csv", "write_segments_json")
 
-__all__ = ["DEFAULTS", "TABLE_COLUMNS", *_LAZY]
+__all__ = [
+    "DEFAULTS",
+    "TABLE_COLUMNS",
+    "segment_planes",
+    "segments_table",
+    "write_segments_csv",
+    "write_segments_json",
+]
 
 
 def __getattr__(name: str):

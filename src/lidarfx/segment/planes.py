@@ -36,8 +36,9 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -51,11 +52,11 @@ from . import DEFAULTS, TABLE_COLUMNS
 
 __all__ = [
     "DEFAULTS",
+    "TABLE_COLUMNS",
     "segment_planes",
     "segments_table",
     "write_segments_csv",
     "write_segments_json",
-    "TABLE_COLUMNS",
 ]
 
 _FREE = -1  # not in a segment, may seed
@@ -149,10 +150,8 @@ def _grow(
                     szz += az * bz
                     if tail >= next_refit:
                         step = int(tail * refit_fraction)
-                        if step > refit_max:
-                            step = refit_max
-                        if step < 1:
-                            step = 1
+                        step = min(step, refit_max)
+                        step = max(step, 1)
                         next_refit = tail + step
                         inv = 1.0 / tail
                         eigh3(sxx * inv, sxy * inv, sxz * inv, syy * inv, syz * inv, szz * inv, lam, v1, v3, work)
@@ -412,12 +411,11 @@ def _fmt(v: Any) -> str:
 
 def write_segments_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> Path:
     """Write the table as CSV (header = :data:`TABLE_COLUMNS`; NaN as empty field), atomically."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(TABLE_COLUMNS)
-            for r in rows:
-                w.writerow([_fmt(r[c]) for c in TABLE_COLUMNS])
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(TABLE_COLUMNS)
+        for r in rows:
+            w.writerow([_fmt(r[c]) for c in TABLE_COLUMNS])
     return Path(path)
 
 
@@ -433,8 +431,7 @@ def write_segments_json(rows: Sequence[dict[str, Any]], path: str | Path, meta: 
         "segmentation": meta or {},
         "segments": [{c: clean(r[c]) for c in TABLE_COLUMNS} for r in rows],
     }
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(doc, fh, indent=1)
-            fh.write("\n")
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1)
+        fh.write("\n")
     return Path(path)
