@@ -167,6 +167,16 @@ def test_input_not_modified_unless_inplace(house_cloud):
     assert {"segment_id", "segment_size", "normal_x", "plane_std"} <= set(small.names)
 
 
+def test_scanner_orients_the_kept_normals_only():
+    c = _two_parallel_planes(0.3)
+    up = segment_planes(c, keep_features=True)
+    down = segment_planes(c, keep_features=True, scanner=(2.0, 2.0, -5.0))
+    ok = np.isfinite(up["normal_z"])
+    assert ok.mean() > 0.999
+    assert (up["normal_z"][ok] > 0.5).all() and (down["normal_z"][ok] < -0.5).all()
+    assert np.array_equal(up["segment_id"], down["segment_id"])  # the growing compares normals axially
+
+
 # ---------------------------------------------------------- other geometries
 def _two_parallel_planes(gap: float, seed: int = 1) -> PointCloud:
     rng = np.random.default_rng(seed)

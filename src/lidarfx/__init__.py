@@ -7,7 +7,7 @@ from .cloud import PointCloud
 from .errors import LidarfxError
 from .io import read, write
 
-__all__ = ["PointCloud", "LidarfxError", "read", "write", "compute_features", "__version__"]
+__all__ = ["PointCloud", "LidarfxError", "read", "write", "compute_features", "segment_planes", "__version__"]
 
 
 def __getattr__(name: str):
@@ -16,8 +16,12 @@ def __getattr__(name: str):
         from .features import compute_features
 
         return compute_features
-    if name == "synth":
+    if name == "segment_planes":
+        from .segment import segment_planes
+
+        return segment_planes
+    if name in ("synth", "select", "segment"):
         import importlib
 
-        return importlib.import_module(".synth", __name__)
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'lidarfx' has no attribute {name!r}")

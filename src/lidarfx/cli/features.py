@@ -6,6 +6,8 @@ import json
 import sys
 import time
 
+from ._args import xyz
+
 EPILOG = """examples:
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
   lidarfx features in.laz out.laz -r 0.1 -r 0.3 -r 0.5 --features eigen   # multi-scale: planarity_r0.10 ...
@@ -18,16 +20,6 @@ distribution, curvature, eigenvectors, count, echo, all — or single names
 (slope, planarity, ...).  Features are written as float32 extra-bytes
 dimensions (LAS/LAZ) or attributes (PLY, text, npz); NaN = not computable.
 """
-
-
-def _floats(text: str) -> list[float]:
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected x,y,z numbers, got {text!r}") from None
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"expected x,y,z (three numbers), got {text!r}")
-    return vals
 
 
 def register(sub) -> None:
@@ -44,7 +36,7 @@ def register(sub) -> None:
     p.add_argument("-f", "--features", default=None, help="comma-separated groups or names (default: eigen,plane,density)")
     p.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere")
     p.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn (a radius then caps the search)")
-    p.add_argument("--scanner", type=_floats, default=None, help="scanner position x,y,z: orient normals towards it (TLS)")
+    p.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z: orient normals towards it (TLS)")
     p.add_argument("--height", type=float, default=None, help="half-height limit of the vertical cylinder (m)")
     p.add_argument("--convention", choices=["default", "cloudcompare", "pdal"], default="default")
     p.add_argument("--d-max", type=float, default=0.10, help="plane inlier distance (m), default 0.10")

@@ -141,7 +141,12 @@ def _check_raster_path(path: str) -> None:
 def run_ground(args) -> int:
     from .. import io
     from .._atomic import check_not_same_file
-    from ..ground import apply_ground_classification, classify_ground, dtm, height_above_ground
+    from ..ground import (
+        apply_ground_classification,
+        classify_ground,
+        dtm,
+        height_above_ground,
+    )
 
     check_not_same_file(args.input, args.output)
     if args.dtm:

@@ -6,6 +6,8 @@ import json
 import sys
 import time
 
+from ._args import xyz
+
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
   lidarfx segment scan.laz seg.laz --min-width 0.15       # drop thin strips along edges
@@ -30,16 +32,6 @@ plane).  Follow up with e.g.
 """
 
 
-def _floats(text: str) -> list[float]:
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected x,y,z numbers, got {text!r}") from None
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"expected x,y,z (three numbers), got {text!r}")
-    return vals
-
-
 def register(sub) -> None:
     from ..segment import DEFAULTS
 
@@ -58,7 +50,7 @@ def register(sub) -> None:
     p.add_argument("--max-angle", type=float, default=DEFAULTS["max_angle"], help="max normal deviation (degrees), default %(default)s")
     p.add_argument("--min-size", type=int, default=DEFAULTS["min_size"], help="minimum points per segment, default %(default)s")
     p.add_argument("--min-width", type=float, default=DEFAULTS["min_width"], help="release segments narrower than this (m; sqrt(12*lambda2)); 0 = off, default %(default)s")
-    p.add_argument("--scanner", type=_floats, default=None, help="scanner position x,y,z for the normals (TLS)")
+    p.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z for the normals (TLS)")
     p.add_argument("--keep-features", action="store_true", help="also write normal_x/y/z and plane_std")
     p.add_argument("--table", default=None, metavar="PATH", help="table path stem: writes PATH.csv and PATH.json (default OUT.segments)")
     p.add_argument("--no-table", action="store_true", help="do not write the per-segment table")

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import LidarfxError
+from ._args import numbers
 
 EPILOG = """examples:
   lidarfx synth --list                                   # the available scenes
@@ -50,12 +51,9 @@ def register(subparsers: Any) -> None:
 
 def _numbers(text: str, n: int, what: str) -> list[float]:
     try:
-        vals = [float(v) for v in text.replace(" ", "").split(",")]
-    except ValueError:
-        raise LidarfxError(f"{what} must be {n} comma-separated numbers, got {text!r}") from None
-    if len(vals) != n:
-        raise LidarfxError(f"{what} must be {n} comma-separated numbers, got {text!r}")
-    return vals
+        return numbers(text, n, what)
+    except ValueError as exc:
+        raise LidarfxError(str(exc)) from None
 
 
 def _params(args: argparse.Namespace) -> dict[str, Any]:

@@ -37,11 +37,11 @@ __all__ = [
 ]
 
 DEFAULTS: dict[str, float] = {
-    "cell": 1.0,
-    "slope": 0.15,
-    "window": 18.0,
-    "threshold": 0.5,
-    "scalar": 1.25,
+    "cell": 1.5,
+    "slope": 0.2,
+    "window": 21.0,
+    "threshold": 0.4,
+    "scalar": 1.5,
 }
 """The one default parameter set (tuned on the 8 ISPRS samples, see docs/ground.md).
 

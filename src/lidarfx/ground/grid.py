@@ -96,7 +96,7 @@ def inpaint(grid: np.ndarray, spec: GridSpec, xy: np.ndarray | None = None) -> n
     vals = grid[known]
     mi, mj = np.nonzero(~known)
     q = np.column_stack([(mj + 0.5) * spec.cell, (mi + 0.5) * spec.cell])
-    out[mi, mj] = tin_interpolate(pts, vals, q)
+    out[mi, mj] = tin_interpolate(pts, vals, q, joggle=xy is None)
     return out
 
 

@@ -22,7 +22,8 @@ def _walk(px, py, simp, neigh, vals, qx, qy, start, out):
         x = qx[k]
         y = qy[k]
         out[k] = np.nan
-        for _ in range(10000):
+        rot = k
+        for _ in range(100000):
             a = simp[t, 0]
             b = simp[t, 1]
             c = simp[t, 2]
@@ -38,31 +39,36 @@ def _walk(px, py, simp, neigh, vals, qx, qy, start, out):
             l0 = ((yb - yc) * (x - xc) + (xc - xb) * (y - yc)) / det
             l1 = ((yc - ya) * (x - xc) + (xa - xc) * (y - yc)) / det
             l2 = 1.0 - l0 - l1
-            # move across the edge opposite the most negative coordinate
-            m = l0
-            e = 0
-            if l1 < m:
-                m = l1
-                e = 1
-            if l2 < m:
-                m = l2
-                e = 2
-            if m >= -1e-12:
+            if l0 >= -1e-12 and l1 >= -1e-12 and l2 >= -1e-12:
                 out[k] = l0 * vals[a] + l1 * vals[b] + l2 * vals[c]
                 break
+            # stochastic visibility walk: cross the first edge (from a rotating
+            # start) whose opposite coordinate is negative; it terminates even
+            # on degenerate (cocircular) triangulations
+            rot = (rot * 1103515245 + 12345) & 0x7FFFFFFF  # tiny LCG
+            e = -1
+            for s in range(3):
+                q = ((rot >> 16) + s) % 3
+                lq = l0 if q == 0 else (l1 if q == 1 else l2)
+                if lq < -1e-12:
+                    e = q
+                    break
             nt = neigh[t, e]
             if nt < 0:
                 break  # outside the convex hull
             t = nt
 
 
-def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, nearest_outside: bool = True) -> np.ndarray:
+def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, nearest_outside: bool = True, joggle: bool = False
+) -> np.ndarray:
     """Linear (TIN) interpolation of ``values`` known at ``xy`` (n×2) at ``query`` (m×2).
 
     Queries outside the convex hull get the value of the nearest known point
     when ``nearest_outside`` (else NaN).  Fewer than 3 points or collinear
     points fall back to the nearest value everywhere.  Coordinates should be
-    local (small numbers) for accuracy.
+    local (small numbers) for accuracy.  ``joggle`` triangulates with
+    Qhull's ``QJ`` option: about twice as fast on regular grids (many
+    cocircular points), for inputs without duplicate xy.
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     values = np.ascontiguousarray(values, dtype=np.float64)
@@ -75,7 +81,7 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     tri = None
     if len(xy) >= 3:
         try:
-            tri = Delaunay(xy)
+            tri = Delaunay(xy, qhull_options="Qbb Qc Qz Q12 QJ" if joggle else None)
         except (QhullError, ValueError):
             tri = None
     if tri is not None and len(tri.simplices):
