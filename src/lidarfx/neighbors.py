@@ -134,7 +134,7 @@ def column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, radi
 
 
 # rows of the buffer filled by ``gather``
-G_DX, G_DY, G_DZ, G_D2, G_H2 = 0, 1, 2, 3, 4
+G_DX, G_DY, G_DZ = 0, 1, 2
 
 
 @nb.njit(cache=True)
@@ -152,7 +152,7 @@ def gather(pts, lo, hi, nr, qx, qy, qz, r2, zhalf, cylinder, buf):
     for k in range(nr):
         need += hi[k] - lo[k]
     if need > buf.shape[1]:
-        buf = np.empty((5, 2 * need))
+        buf = np.empty((3, 2 * need))
     cnt = 0
     for k in range(nr):
         for j in range(lo[k], hi[k]):
@@ -164,8 +164,6 @@ def gather(pts, lo, hi, nr, qx, qy, qz, r2, zhalf, cylinder, buf):
             buf[G_DX, cnt] = dx
             buf[G_DY, cnt] = dy
             buf[G_DZ, cnt] = dz
-            buf[G_D2, cnt] = d2
-            buf[G_H2, cnt] = h2
             if cylinder:
                 cnt += h2 <= r2 and abs(dz) <= zhalf
             else:

@@ -59,6 +59,8 @@ def _add_params(p) -> None:
     g.add_argument("--window", type=float, default=DEFAULTS["window"], help="largest opening radius (m), default %(default)s")
     g.add_argument("--threshold", type=float, default=DEFAULTS["threshold"], help="final elevation threshold (m), default %(default)s")
     g.add_argument("--scalar", type=float, default=DEFAULTS["scalar"], help="threshold per unit DTM slope (m), default %(default)s")
+    g.add_argument("--edge-step", type=float, default=DEFAULTS["edge_step"], help="step height (m) on object boundaries, default %(default)s")
+    g.add_argument("--edge-share", type=float, default=DEFAULTS["edge_share"], help="boundary share of steps to stay an object (0 = plain SMRF), default %(default)s")
     g.add_argument("--all-returns", action="store_true", help="use every return, not only last returns")
     g.add_argument(
         "--ignore-classes",
@@ -75,6 +77,8 @@ def _params(args) -> dict:
         "window": args.window,
         "threshold": args.threshold,
         "scalar": args.scalar,
+        "edge_step": args.edge_step,
+        "edge_share": args.edge_share,
         "last_returns": not args.all_returns,
     }
 

@@ -58,6 +58,16 @@ def _fill_nan(a):
         a[r, :] = np.nan
 
 
+@nb.njit(cache=True, parallel=True)
+def _unpermute_rows(a, perm):
+    """In place, for every row: a[r, perm[i]] = old a[r, i] (one row at a time stays in cache)."""
+    for r in nb.prange(a.shape[0]):
+        tmp = a[r].copy()
+        row = a[r]
+        for i in range(tmp.shape[0]):
+            row[perm[i]] = tmp[i]
+
+
 def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:
     """Processing order of query points: by grid column, so neighbours stay in cache."""
     ix = np.floor(q[:, 0] / cell).astype(np.int64)
@@ -120,19 +130,18 @@ def feature_arrays(
         cell = default_cell_for_knn(xyz - xyz.min(0), k) if neighbourhood == "knn" else rs[-1]
         index = NeighborIndex(xyz, cell)
     g = index.grid
+    # queries in grid order: consecutive queries share cached neighbours and
+    # results are written sequentially; ``perm[i]`` is the output row of query i
     if query_xyz is None:
-        # the cloud itself: read queries from the sorted points, scatter results back
-        q = g.pts
-        m = len(q)
-        qorder = np.arange(m, dtype=np.int64)
-        opos = index.order
+        q = g.pts  # the cloud itself: the index's sorted points
+        perm = index.order
         qid = index.order
     else:
-        q = index.to_local(query_xyz)
-        m = len(q)
-        qorder = _grid_order(q, g.cell)
-        opos = np.arange(m, dtype=np.int64)
-        qid = opos if query_ids is None else np.asarray(query_ids, dtype=np.int64)
+        ql = index.to_local(query_xyz)
+        perm = _grid_order(ql, g.cell)
+        q = np.ascontiguousarray(ql[perm])
+        qid = perm if query_ids is None else np.asarray(query_ids, dtype=np.int64)[perm]
+    m = len(q)
     if neighbourhood == "knn":
         _, kd = index.knn(q + index.origin, int(k), max_radius=rs[0] if rs else None)
         rk = np.where(np.isfinite(kd), kd, -np.inf).max(axis=1)
@@ -164,20 +173,21 @@ def feature_arrays(
     show = wanted(progress, m * nscale, threshold=2_000_000)
     with bar("features", m, show) as advance:
         for a in range(0, m, _BLOCK):
-            blk = qorder[a : a + _BLOCK]
+            b = min(m, a + _BLOCK)
             if req.need_engine:
                 point_features(
-                    *g, q, blk, opos, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
+                    *g, q, a, b, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
                     int(hist_bins), req.need_cylinder, req.need_pass2, nbuf, out,
                 )
             if req.need_msac:
                 thr = float(d_max if msac_threshold is None else msac_threshold)
                 for s in range(nscale):
                     msac_features(
-                        *g, q, blk, opos, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
+                        *g, q, a, b, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
                         10, int(msac_iterations), int(seed), nbuf, out,
                     )
-            advance(len(blk))
+            advance(b - a)
+    _unpermute_rows(out.reshape(-1, m), perm)
     result: dict[str, np.ndarray] = {}
     for s, suffix in enumerate(names_for_scale):
         for c, slot in enumerate(req.slots):

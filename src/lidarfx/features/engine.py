@@ -4,7 +4,7 @@ For every query point the kernel walks the candidate runs of the sorted grid
 (:func:`lidarfx.neighbors.column_ranges`) of the *widest* neighbourhood once —
 the largest radius; the whole vertical cylinder when density, height or
 histogram features are requested — and compacts the points inside it into a
-small per-thread buffer (structure of arrays: dx, dy, dz, d², h² relative to
+small per-thread buffer (structure of arrays: dx, dy, dz relative to
 the query point; branch-free).  Everything else runs over that buffer, which
 sits in L1 cache:
 
@@ -18,9 +18,10 @@ sits in L1 cache:
   height-difference histogram and the octant / above-below counts.
 
 So several radii cost one walk of the largest, plus cheap passes over the
-buffer.  Queries are processed in grid order (``qorder``) so that consecutive
-queries share cached neighbours; results land at their output positions
-(``opos``).
+buffer.  The caller passes the query points in grid order (for a whole cloud:
+the index's own sorted points), so consecutive queries share cached
+neighbours and results are written sequentially; the caller restores the
+original order afterwards, one feature at a time.
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..neighbors import G_D2, G_DX, G_DY, G_DZ, G_H2, column_ranges, gather
+from ..neighbors import G_DX, G_DY, G_DZ, column_ranges, gather
 from . import slots as S
 from .curvature import quadric_curvatures
 from .eigen import eigen_features, eigh3
@@ -51,7 +52,7 @@ _INL, _ECHO, _ABV, _BLW, _CABV, _CBLW = range(6)
 
 
 # rows of the gathered neighbour buffer (lidarfx.neighbors.gather)
-_BX, _BY, _BZ, _BD2, _BH2 = G_DX, G_DY, G_DZ, G_D2, G_H2
+_BX, _BY, _BZ = G_DX, G_DY, G_DZ
 
 
 @nb.njit(cache=True, fastmath=_FAST)
@@ -62,10 +63,11 @@ def _sum_cov(buf, cnt, r2, height, cylinder, acc):
         dx = buf[_BX, j]
         dy = buf[_BY, j]
         dz = buf[_BZ, j]
+        h2 = dx * dx + dy * dy
         if cylinder:
-            w = 1.0 if (buf[_BH2, j] <= r2 and abs(dz) <= height) else 0.0
+            w = 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
         else:
-            w = 1.0 if buf[_BD2, j] <= r2 else 0.0
+            w = 1.0 if h2 + dz * dz <= r2 else 0.0
         n += w
         sx += w * dx
         sy += w * dy
@@ -95,9 +97,12 @@ def _sum_cyl(buf, cnt, r2, height, acc):
     zmn = 1e300
     zmx = -1e300
     for j in range(cnt):
+        dx = buf[_BX, j]
+        dy = buf[_BY, j]
         dz = buf[_BZ, j]
-        nsph += 1.0 if buf[_BD2, j] <= r2 else 0.0
-        w = 1.0 if (buf[_BH2, j] <= r2 and abs(dz) <= height) else 0.0
+        h2 = dx * dx + dy * dy
+        nsph += 1.0 if h2 + dz * dz <= r2 else 0.0
+        w = 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
         ncyl += w
         cz += w * dz
         czz += w * dz * dz
@@ -123,8 +128,9 @@ def _count_plane(buf, cnt, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax
         dx = buf[_BX, j]
         dy = buf[_BY, j]
         dz = buf[_BZ, j]
-        d2 = buf[_BD2, j]
-        wc = 1.0 if (buf[_BH2, j] <= r2 and abs(dz) <= height) else 0.0
+        h2 = dx * dx + dy * dy
+        d2 = h2 + dz * dz
+        wc = 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
         wm = wc if cylinder else (1.0 if d2 <= r2 else 0.0)
         dist = (dx - cx) * nx_ + (dy - cy) * ny_ + (dz - cz) * nz_
         inl += wm * (1.0 if abs(dist) <= dmax else 0.0)
@@ -136,9 +142,9 @@ def _count_plane(buf, cnt, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax
 @nb.njit(cache=True, parallel=True)
 def point_features(
     pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
-    q,  # (m, 3) query points, local coordinates
-    qorder,  # rows of q to process, in grid order (a block of the full order)
-    opos,  # (m,) output position of each row of q
+    q,  # (m, 3) query points, local coordinates, in grid order
+    start,  # first row of q to process
+    stop,  # one past the last row
     rad,  # (1 or m, S) radii per scale, ascending (one per point for kNN)
     kind,  # KIND_SPHERE / KIND_CYLINDER: neighbourhood of the covariance features
     height,  # half-height of the cylinder (inf = unbounded)
@@ -153,7 +159,7 @@ def point_features(
     nbuf,  # size of the column-run buffers
     out,  # (S, F, m) float32; every row of a processed query is written (NaN = not computable)
 ):
-    m = qorder.shape[0]
+    m = stop - start
     nscale = rad.shape[1]
     per_point = rad.shape[0] > 1
     cyl_kind = kind == KIND_CYLINDER
@@ -166,7 +172,7 @@ def point_features(
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
-        buf = np.empty((5, 1024))
+        buf = np.empty((3, 1024))
         acc = np.empty(_NACC)
         p2 = np.empty(6)
         quad = np.empty(27)
@@ -176,11 +182,9 @@ def point_features(
         v3 = np.empty(3)
         v2 = np.empty(3)
         work = np.empty(48)
-        for t in range(ch * chunk, min(m, ch * chunk + chunk)):
-            i = qorder[t]
+        for i in range(start + ch * chunk, min(stop, start + ch * chunk + chunk)):
             row = i if per_point else 0
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
-            oi = opos[i]
             # one walk of the widest neighbourhood, compacted into buf
             rmax = rad[row, nscale - 1]
             wide_cyl = need_cyl or cyl_kind
@@ -190,7 +194,7 @@ def point_features(
             for s in range(nscale):
                 r = rad[row, s]
                 r2 = r * r
-                o = out[s, :, oi]
+                o = out[s, :, i]
                 o[:] = np.nan
                 _sum_cov(buf, cnt, r2, height, cyl_kind, acc)
                 if need_cyl:
@@ -286,8 +290,9 @@ def point_features(
                     dx = buf[_BX, j]
                     dy = buf[_BY, j]
                     dz = buf[_BZ, j]
-                    d2 = buf[_BD2, j]
-                    in_cyl = buf[_BH2, j] <= r2 and abs(dz) <= height
+                    h2 = dx * dx + dy * dy
+                    d2 = h2 + dz * dz
+                    in_cyl = h2 <= r2 and abs(dz) <= height
                     if in_cyl and want_hist:
                         u = 0.0 if amax <= 0.0 else -dz / amax
                         b = int((u + 1.0) * 0.5 * nbins)

@@ -33,14 +33,15 @@ def _splitmix(state):
 @nb.njit(cache=True, parallel=True)
 def msac_features(
     pts, cstart, cend, ckey, table, nx, ny, cell,
-    q, qorder, opos, qid, rad, scale, kind, height, scanner, has_scanner,
+    q, start, stop, qid, rad, scale, kind, height, scanner, has_scanner,
     col, thr, min_iter, max_iter, seed, nbuf, out,
 ):
-    """MSAC plane features for scale ``scale`` of ``rad``; writes ``out[scale, :, opos[i]]``.
+    """MSAC plane features for scale ``scale`` of ``rad`` for rows start..stop of ``q``
+    (grid order); writes ``out[scale, :, i]``.
 
     ``qid[i]`` is the global id of query row i, used to seed its generator.
     """
-    m = qorder.shape[0]
+    m = stop - start
     per_point = rad.shape[0] > 1
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
@@ -48,14 +49,12 @@ def msac_features(
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
-        buf = np.empty((5, 256))
+        buf = np.empty((3, 256))
         lam = np.empty(3)
         v1 = np.empty(3)
         v3 = np.empty(3)
         work = np.empty(12)
-        for t in range(ch * chunk, min(m, ch * chunk + chunk)):
-            i = qorder[t]
-            oi = opos[i]
+        for i in range(start + ch * chunk, min(stop, start + ch * chunk + chunk)):
             r = rad[i if per_point else 0, scale]
             r2 = r * r
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
@@ -159,7 +158,7 @@ def msac_features(
                 if e * e <= thr2:
                     ss += e * e
                     nin2 += 1
-            o = out[scale, :, oi]
+            o = out[scale, :, i]
             slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
             S.put(o, col, S.MSAC_NORMAL_X, nxv)
             S.put(o, col, S.MSAC_NORMAL_Y, nyv)

@@ -42,6 +42,8 @@ DEFAULTS: dict[str, float] = {
     "window": 21.0,
     "threshold": 0.4,
     "scalar": 1.5,
+    "edge_step": 1.0,
+    "edge_share": 0.15,
 }
 """The one default parameter set (tuned on the 8 ISPRS samples, see docs/ground.md).
 
@@ -50,6 +52,9 @@ DEFAULTS: dict[str, float] = {
 ``window``    largest opening radius (m)
 ``threshold`` final elevation threshold (m)
 ``scalar``    final threshold added per unit of DTM slope (m per rise/run)
+``edge_step`` height drop (m) that counts as a step on an object region's boundary
+``edge_share`` share of the boundary that must be steps for a region to stay an
+              object (0 switches the step check off: plain SMRF)
 """
 
 IGNORE_CLASSES: tuple[int, ...] = (7, 18, 66)
@@ -92,7 +97,7 @@ def _check_params(p: dict[str, float]) -> None:
     for name in ("cell", "window"):
         if not (np.isfinite(p[name]) and p[name] > 0):
             raise LidarfxError(f"{name} must be a positive number, got {p[name]!r}")
-    for name in ("slope", "threshold", "scalar"):
+    for name in ("slope", "threshold", "scalar", "edge_step", "edge_share"):
         if not (np.isfinite(p[name]) and p[name] >= 0):
             raise LidarfxError(f"{name} must be a non-negative number, got {p[name]!r}")
 
@@ -105,8 +110,11 @@ def classify_ground(
     window: float = DEFAULTS["window"],
     threshold: float = DEFAULTS["threshold"],
     scalar: float = DEFAULTS["scalar"],
+    edge_step: float = DEFAULTS["edge_step"],
+    edge_share: float = DEFAULTS["edge_share"],
     last_returns: bool = True,
     ignore_classes: Iterable[int] | None = IGNORE_CLASSES,
+    units: str = "auto",
     progress: bool | None = None,
 ) -> np.ndarray:
     """Ground mask of an ALS point cloud by SMRF (Pingel, Clarke & McBride 2013).
@@ -115,7 +123,7 @@ def classify_ground(
     ----------
     cloud:
         :class:`~lidarfx.PointCloud` or an ``(n, 3)`` array of coordinates.
-    cell, slope, window, threshold, scalar:
+    cell, slope, window, threshold, scalar, edge_step, edge_share:
         SMRF parameters, defaults :data:`DEFAULTS` (see docs/ground.md).
     last_returns:
         Use only last returns where return information exists; other returns
@@ -123,6 +131,11 @@ def classify_ground(
     ignore_classes:
         Classes (of an existing ``classification``) that are neither used nor
         made ground; default :data:`IGNORE_CLASSES` (noise 7, 18; virtual 66).
+    units:
+        ``"auto"``: the lengths ``cell``, ``window``, ``threshold``, ``scalar``
+        and ``edge_step`` are metres and are converted to the coordinate unit
+        when the LAS header's CRS names another linear unit (e.g. US feet);
+        ``"native"``: they are in coordinate units as given.
     progress:
         Progress bar: ``True``/``False``, or ``None`` for large clouds on a terminal.
 
@@ -134,8 +147,18 @@ def classify_ground(
     from .smrf import smrf
 
     params = {"cell": float(cell), "slope": float(slope), "window": float(window),
-              "threshold": float(threshold), "scalar": float(scalar)}
+              "threshold": float(threshold), "scalar": float(scalar),
+              "edge_step": float(edge_step), "edge_share": float(edge_share)}
     _check_params(params)
+    if units not in ("auto", "native"):
+        raise LidarfxError(f"units must be 'auto' or 'native', got {units!r}")
+    if units == "auto" and isinstance(cloud, PointCloud):
+        u = (cloud_crs(cloud) or {}).get("unit_to_metre")
+        if u and u > 0 and abs(u - 1.0) > 1e-9:
+            for name in ("cell", "window", "threshold", "scalar", "edge_step"):
+                params[name] /= u
+    cell = params["cell"]
+    window = params["window"]
     xyz, _ = _xyz_attrs(cloud)
     cand = candidate_mask(cloud, last_returns=last_returns, ignore_classes=ignore_classes)
     mask = np.zeros(len(xyz), dtype=bool)

@@ -17,7 +17,7 @@ GROUND_CLASS = 2
 
 
 def cloud_crs(cloud: PointCloud) -> dict[str, Any] | None:
-    """``{"wkt", "epsg", "geographic"}`` from a LAS header, else ``None``."""
+    """``{"wkt", "epsg", "geographic", "unit_to_metre"}`` from a LAS header, else ``None``."""
     header = cloud.header
     if header is None:
         return None
@@ -31,7 +31,12 @@ def cloud_crs(cloud: PointCloud) -> dict[str, Any] | None:
         return None
     if not info:
         return None
-    return {"wkt": info.get("wkt"), "epsg": info.get("epsg"), "geographic": bool(info.get("geographic"))}
+    return {
+        "wkt": info.get("wkt"),
+        "epsg": info.get("epsg"),
+        "geographic": bool(info.get("geographic")),
+        "unit_to_metre": info.get("unit_to_metre"),
+    }
 
 
 def ground_mask_of(cloud: PointCloud, ground: Any = None) -> np.ndarray:

@@ -14,6 +14,12 @@ Steps (paper section numbers in brackets):
    ``slope · r · cell``;
 4. provisional DTM: the minimum surface without object, low-outlier and empty
    cells, inpainted [2.3];
+4a. (lidarfx addition) step check: a connected region of object cells is an
+   object only if at least ``edge_share`` of its boundary drops by more than
+   ``edge_step`` to the neighbouring non-object cells; a region without such
+   steps is a smooth terrain convexity (dike, ridge, terrace crest) that the
+   opening removed, and goes back to the terrain.  Buildings, bridges and
+   trees are bounded by steps;
 5. final classification [2.4]: a point is ground when its vertical distance to
    the provisional DTM (bilinear) is at most ``threshold + scalar · g``, g
    being the DTM gradient (rise / run) in the point's cell.
@@ -23,6 +29,8 @@ from __future__ import annotations
 from typing import Callable, NamedTuple
 
 import numpy as np
+
+from scipy import ndimage
 
 from .grid import GridSpec, bilinear, cell_index, gradient_slope, inpaint, min_surface, open_disk
 
@@ -62,12 +70,41 @@ def progressive_objects(
     return obj
 
 
+def step_check(obj: np.ndarray, zfill: np.ndarray, step: float, share: float) -> np.ndarray:
+    """Object cells that belong to a region bounded by steps (see module doc, 4a).
+
+    For every 8-connected region of ``obj`` the boundary pairs (object cell,
+    4-neighbour non-object cell) are counted, and those where the object cell
+    is more than ``step`` higher in ``zfill``; regions with a share of such
+    pairs below ``share`` (or with no boundary at all) are dropped.
+    """
+    if share <= 0 or not obj.any():
+        return obj
+    lab, nlab = ndimage.label(obj, structure=np.ones((3, 3), dtype=bool))
+    total = np.zeros(nlab + 1)
+    steps = np.zeros(nlab + 1)
+    ny, nx = obj.shape
+    for di, dj in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        a = (slice(max(0, -di), ny - max(0, di)), slice(max(0, -dj), nx - max(0, dj)))
+        b = (slice(max(0, di), ny - max(0, -di)), slice(max(0, dj), nx - max(0, -dj)))
+        edge = obj[a] & ~obj[b]
+        la = lab[a][edge]
+        total += np.bincount(la, minlength=nlab + 1)
+        steps += np.bincount(la, weights=(zfill[a][edge] - zfill[b][edge]) > step, minlength=nlab + 1)
+    is_object = steps >= share * np.maximum(total, 1)
+    is_object &= total > 0
+    is_object[0] = False
+    return obj & is_object[lab]
+
+
 def provisional_dtm(
     xyz: np.ndarray,
     *,
     cell: float,
     slope: float,
     window: float,
+    edge_step: float = 1.0,
+    edge_share: float = 0.15,
     advance: Callable[[int], None] | None = None,
 ) -> SmrfSurface:
     """Steps 1–4 of SMRF on local coordinates ``xyz`` (n×3)."""
@@ -83,6 +120,7 @@ def provisional_dtm(
         zfill = inpaint(z2, spec)
     radius = max(1, int(round(window / cell)))
     obj = progressive_objects(zfill, cell, slope, radius, advance)
+    obj = step_check(obj, zfill, edge_step, edge_share)
     kept = ~(obj | empty | low)
     if not kept.any():  # nothing survived (e.g. a single roof): keep the lowest cell
         kept = np.zeros_like(kept)
@@ -100,10 +138,14 @@ def smrf(
     window: float = 18.0,
     threshold: float = 0.5,
     scalar: float = 1.25,
+    edge_step: float = 1.0,
+    edge_share: float = 0.15,
     advance: Callable[[int], None] | None = None,
 ) -> tuple[np.ndarray, SmrfSurface]:
     """SMRF ground mask of local points ``xyz`` (n×3) and the provisional DTM."""
-    surf = provisional_dtm(xyz, cell=cell, slope=slope, window=window, advance=advance)
+    surf = provisional_dtm(
+        xyz, cell=cell, slope=slope, window=window, edge_step=edge_step, edge_share=edge_share, advance=advance
+    )
     i, j = cell_index(xyz[:, :2], surf.spec)
     g = gradient_slope(surf.grid, cell)
     z = bilinear(surf.grid, surf.spec, xyz[:, :2])

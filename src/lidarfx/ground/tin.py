@@ -15,7 +15,7 @@ __all__ = ["tin_interpolate"]
 
 
 @nb.njit(cache=True)
-def _walk(px, py, simp, neigh, vals, qx, qy, start, out):
+def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out):
     n = qx.shape[0]
     for k in range(n):
         t = start[k]
@@ -23,7 +23,8 @@ def _walk(px, py, simp, neigh, vals, qx, qy, start, out):
         y = qy[k]
         out[k] = np.nan
         rot = k
-        for _ in range(100000):
+        for _ in range(max_steps):  # a query outside the hull and collinear with a hull
+            # edge can circle a hull corner for ever: give up (NaN -> nearest)
             a = simp[t, 0]
             b = simp[t, 1]
             c = simp[t, 2]
@@ -85,8 +86,12 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
         except (QhullError, ValueError):
             tri = None
     if tri is not None and len(tri.simplices):
-        start = tri.vertex_to_simplex[nn].astype(np.int64)
+        v2s = tri.vertex_to_simplex.astype(np.int64)
+        if len(tri.coplanar):  # duplicate / coplanar points: start at the facet they fell into
+            v2s[tri.coplanar[:, 0]] = tri.coplanar[:, 1]
+        start = v2s[nn]
         start[start < 0] = 0
+        max_steps = 200 + 4 * int(np.sqrt(len(tri.simplices)))
         _walk(
             np.ascontiguousarray(tri.points[:, 0]),
             np.ascontiguousarray(tri.points[:, 1]),
@@ -96,6 +101,7 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
             query[:, 0].copy(),
             query[:, 1].copy(),
             start,
+            max_steps,
             out,
         )
     if nearest_outside:
