@@ -378,3 +378,20 @@ def test_return_ratio():
     cloud = PointCloud(np.zeros((3, 3)), {"return_number": np.array([1, 2, 3]), "number_of_returns": np.array([3, 3, 3])})
     out = compute_features(cloud, "echo")
     np.testing.assert_allclose(out["return_ratio"], [1 / 3, 2 / 3, 1])
+
+
+def test_height_above_ground_feature():
+    """From the class-2 ground when present; from the ground filter otherwise."""
+    rng = np.random.default_rng(5)
+    g = np.c_[rng.uniform(0, 40, 8000), rng.uniform(0, 40, 8000), np.zeros(8000)]
+    g[:, 2] = 0.05 * g[:, 0]  # a gentle slope
+    roof = np.c_[rng.uniform(15, 25, 1500), rng.uniform(15, 25, 1500), np.zeros(1500)]
+    roof[:, 2] = 0.05 * roof[:, 0] + 6.0
+    xyz = np.vstack([g, roof])
+    cls = np.r_[np.full(8000, 2), np.full(1500, 6)].astype(np.uint8)
+    labelled = compute_features(PointCloud(xyz, {"classification": cls}), "height_above_ground")
+    np.testing.assert_allclose(labelled["height_above_ground"][8000:], 6.0, atol=1e-3)
+    np.testing.assert_allclose(labelled["height_above_ground"][:8000], 0.0, atol=1e-3)
+    unlabelled = compute_features(PointCloud(xyz), ["height_above_ground", "planarity"], radius=1.0, query=np.arange(8000, 9500))
+    assert np.median(unlabelled["height_above_ground"]) == pytest.approx(6.0, abs=0.05)
+    assert "height_above_ground" not in compute_features(PointCloud(xyz), "all", radius=1.0).meta["features"]

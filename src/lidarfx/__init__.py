@@ -7,7 +7,16 @@ from .cloud import PointCloud
 from .errors import LidarfxError
 from .io import read, write
 
-__all__ = ["PointCloud", "LidarfxError", "read", "write", "compute_features", "segment_planes", "__version__"]
+__all__ = [
+    "PointCloud",
+    "LidarfxError",
+    "read",
+    "write",
+    "compute_features",
+    "segment_planes",
+    "classify_ground",
+    "__version__",
+]
 
 
 def __getattr__(name: str):
@@ -20,7 +29,11 @@ def __getattr__(name: str):
         from .segment import segment_planes
 
         return segment_planes
-    if name in ("synth", "select", "segment"):
+    if name == "classify_ground":
+        from .ground import classify_ground
+
+        return classify_ground
+    if name in ("synth", "select", "segment", "ground"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

@@ -160,7 +160,7 @@ def run_ground(args) -> int:
     cloud = io.read(args.input, progress=progress)
     t1 = time.perf_counter()
     mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **_params(args))
-    out = apply_ground_classification(cloud, mask, ignore_classes=args.ignore_classes)
+    out = apply_ground_classification(cloud, mask, ignore_classes=args.ignore_classes, **_params(args))
     t2 = time.perf_counter()
     if args.hag:
         out["height_above_ground"] = height_above_ground(out, mask)

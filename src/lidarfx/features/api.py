@@ -223,9 +223,11 @@ def compute_features(
         The neighbour cloud.
     features:
         Group names (``eigen, westin, plane, msac, density, height, histogram,
-        distribution, curvature, eigenvectors, count, echo``), single feature
-        names (``slope``), ``all``, or a comma-separated string of them.
-        Default: ``eigen, plane, density``.
+        distribution, curvature, eigenvectors, count, echo, ground``), single
+        feature names (``slope``), ``all`` (every group but ``ground``), or a
+        comma-separated string of them.  Default: ``eigen, plane, density``.
+        ``height_above_ground`` (group ``ground``) uses the cloud's class 2
+        points, or runs :func:`lidarfx.ground.classify_ground` when there are none.
     radius, radii:
         One radius, or several (multi-scale: names get the suffix ``_r0.50``).
         With ``neighbourhood="knn"`` an optional radius caps the kNN search.
@@ -295,20 +297,22 @@ def compute_features(
         seed=seed,
         progress=progress,
     )
+    point = {name: _point_feature(name, cloud) for name in req.point}
     if qi is not None:
         result = cloud.subset(qi)
+        point = {k: v[qi] for k, v in point.items()}
     elif inplace:
         result = cloud
     else:
         result = PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
-    for name in req.point:
-        result[name] = _point_feature(name, result)
+    result.update(point)
     result.update(arrays)
     result.meta["features"] = list(req.point) + list(arrays)
     return result
 
 
 def _point_feature(name: str, cloud: PointCloud) -> np.ndarray:
+    """A per-point feature of every point of ``cloud``."""
     if name == "return_ratio":
         if "return_number" not in cloud or "number_of_returns" not in cloud:
             return np.full(len(cloud), np.nan, np.float32)
@@ -316,4 +320,11 @@ def _point_feature(name: str, cloud: PointCloud) -> np.ndarray:
         nr = cloud["number_of_returns"].astype(np.float32)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(nr > 0, rn / nr, np.nan).astype(np.float32)
+    if name == "height_above_ground":
+        from ..ground import classify_ground, height_above_ground
+
+        cls = cloud.get("classification")
+        has_ground = cls is not None and bool(np.any(cls == 2))
+        # the cloud's ground class when it has one, else the ground filter's ground
+        return height_above_ground(cloud, ground=None if has_ground else classify_ground(cloud))
     raise LidarfxError(f"unknown per-point feature {name!r}")  # pragma: no cover

@@ -14,19 +14,15 @@ from ..errors import LidarfxError
 from . import slots as S
 
 #: per-point features that need no neighbourhood
-POINT_FEATURES = {"echo": ("return_ratio",)}
+POINT_FEATURES = {"echo": ("return_ratio",), "ground": ("height_above_ground",)}
 POINT_NAMES = {n for names in POINT_FEATURES.values() for n in names}
 
 #: what ``--features`` means when not given
 DEFAULT_FEATURES = ("eigen", "plane", "density")
 
-#: ``all`` = every group (the eigenvector and count helpers included)
-ALL_GROUPS = tuple(S.GROUPS) + tuple(POINT_FEATURES)
-
-#: names that belong to later capabilities, with a pointer for the user
-DEFERRED = {
-    "height_above_ground": "height_above_ground needs a ground model; it is not available yet",
-}
+#: ``all`` = every neighbourhood group (eigenvector and count helpers included) and
+#: return_ratio; height_above_ground (it may run the ground filter) only when asked for
+ALL_GROUPS = tuple(S.GROUPS) + ("echo",)
 
 
 @dataclass(frozen=True)
@@ -97,8 +93,6 @@ def resolve(features: str | Iterable[str] | None) -> Request:
         elif name in POINT_NAMES:
             if name not in point:
                 point.append(name)
-        elif name in DEFERRED:
-            raise LidarfxError(DEFERRED[name])
         else:
             groups = ", ".join(list(S.GROUPS) + list(POINT_FEATURES))
             raise LidarfxError(

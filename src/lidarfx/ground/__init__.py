@@ -20,6 +20,7 @@ from .. import progress as _progress
 from ..cloud import PointCloud
 from ..errors import LidarfxError
 from .dtm import cloud_crs, dtm, height_above_ground
+from .params import DEFAULTS
 from .evaluate import ground_errors
 from .raster import Raster
 
@@ -35,27 +36,6 @@ __all__ = [
     "Raster",
     "cloud_crs",
 ]
-
-DEFAULTS: dict[str, float] = {
-    "cell": 1.5,
-    "slope": 0.2,
-    "window": 21.0,
-    "threshold": 0.4,
-    "scalar": 1.5,
-    "edge_step": 1.0,
-    "edge_share": 0.15,
-}
-"""The one default parameter set (tuned on the 8 ISPRS samples, see docs/ground.md).
-
-``cell``      grid cell of the minimum surface (m)
-``slope``     slope (rise/run) of the progressive opening's elevation threshold
-``window``    largest opening radius (m)
-``threshold`` final elevation threshold (m)
-``scalar``    final threshold added per unit of DTM slope (m per rise/run)
-``edge_step`` height drop (m) that counts as a step on an object region's boundary
-``edge_share`` share of the boundary that must be steps for a region to stay an
-              object (0 switches the step check off: plain SMRF)
-"""
 
 IGNORE_CLASSES: tuple[int, ...] = (7, 18, 66)
 """Classes never used and never made ground: low noise 7, high noise 18, IGN virtual points 66."""
@@ -195,12 +175,14 @@ def apply_ground_classification(
     and virtual points 66 by default), which keep it.  Any other earlier class
     (including an old 2) is overwritten.  ``ground`` is a precomputed mask;
     otherwise :func:`classify_ground` runs with ``ignore_classes`` and
-    ``**params``.  The parameters used go to ``meta["ground"]``.
+    ``**params`` (with a precomputed mask, ``**params`` only documents how it
+    was made).  The parameters go to ``meta["ground"]``.
     """
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("apply_ground_classification needs a PointCloud")
     if ground is None:
         ground = classify_ground(cloud, ignore_classes=ignore_classes, **params)
+    params = {k: v for k, v in params.items() if k in DEFAULTS}
     ground = np.asarray(ground, dtype=bool)
     if ground.shape != (len(cloud),):
         raise LidarfxError(f"ground mask must have length {len(cloud)}")

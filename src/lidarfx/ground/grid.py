@@ -137,11 +137,6 @@ def open_disk(grid: np.ndarray, r: int) -> np.ndarray:
     return _disk_filter(_disk_filter(grid, r, "min"), r, "max")
 
 
-def close_disk(grid: np.ndarray, r: int) -> np.ndarray:
-    """Morphological closing (dilation then erosion) with a disk of radius ``r`` cells."""
-    return _disk_filter(_disk_filter(grid, r, "max"), r, "min")
-
-
 def bilinear(grid: np.ndarray, spec: GridSpec, xy: np.ndarray) -> np.ndarray:
     """Bilinear interpolation of a filled grid (values at cell centres) at local xy."""
     c = spec.cell

@@ -32,6 +32,7 @@ import numpy as np
 
 from scipy import ndimage
 
+from .params import DEFAULTS
 from .grid import GridSpec, bilinear, cell_index, gradient_slope, inpaint, min_surface, open_disk
 
 __all__ = ["progressive_objects", "provisional_dtm", "smrf", "SmrfSurface"]
@@ -103,8 +104,8 @@ def provisional_dtm(
     cell: float,
     slope: float,
     window: float,
-    edge_step: float = 1.0,
-    edge_share: float = 0.15,
+    edge_step: float = DEFAULTS["edge_step"],
+    edge_share: float = DEFAULTS["edge_share"],
     advance: Callable[[int], None] | None = None,
 ) -> SmrfSurface:
     """Steps 1–4 of SMRF on local coordinates ``xyz`` (n×3)."""
@@ -133,13 +134,13 @@ def provisional_dtm(
 def smrf(
     xyz: np.ndarray,
     *,
-    cell: float = 1.0,
-    slope: float = 0.15,
-    window: float = 18.0,
-    threshold: float = 0.5,
-    scalar: float = 1.25,
-    edge_step: float = 1.0,
-    edge_share: float = 0.15,
+    cell: float = DEFAULTS["cell"],
+    slope: float = DEFAULTS["slope"],
+    window: float = DEFAULTS["window"],
+    threshold: float = DEFAULTS["threshold"],
+    scalar: float = DEFAULTS["scalar"],
+    edge_step: float = DEFAULTS["edge_step"],
+    edge_share: float = DEFAULTS["edge_share"],
     advance: Callable[[int], None] | None = None,
 ) -> tuple[np.ndarray, SmrfSurface]:
     """SMRF ground mask of local points ``xyz`` (n×3) and the provisional DTM."""
