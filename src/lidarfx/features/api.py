@@ -60,12 +60,16 @@ def _fill_nan(a):
 
 @nb.njit(cache=True, parallel=True)
 def _unpermute_rows(a, perm):
-    """In place, for every row: a[r, perm[i]] = old a[r, i] (one row at a time stays in cache)."""
+    """In place, for every row: a[r, perm[i]] = old a[r, i] — as a gather through the
+    inverse permutation (sequential writes), one row at a time (it stays in cache)."""
+    inv = np.empty_like(perm)
+    for i in range(perm.shape[0]):
+        inv[perm[i]] = i
     for r in nb.prange(a.shape[0]):
         tmp = a[r].copy()
         row = a[r]
-        for i in range(tmp.shape[0]):
-            row[perm[i]] = tmp[i]
+        for j in range(tmp.shape[0]):
+            row[j] = tmp[inv[j]]
 
 
 def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:

@@ -23,8 +23,9 @@ CONVENTIONS = {"default": CONV_DEFAULT, "cloudcompare": CONV_CLOUDCOMPARE, "pdal
 
 
 @nb.njit(cache=True, inline="always")
-def _unit_cross_best(r0x, r0y, r0z, r1x, r1y, r1z, r2x, r2y, r2z, out):
-    """Unit vector along the largest of the three cross products of the rows; False if all vanish."""
+def _unit_cross_best(r0x, r0y, r0z, r1x, r1y, r1z, r2x, r2y, r2z):
+    """Unit vector along the largest of the three cross products of the rows, and
+    whether one exists (False when all vanish)."""
     ax = r0y * r1z - r0z * r1y
     ay = r0z * r1x - r0x * r1z
     az = r0x * r1y - r0y * r1x
@@ -44,39 +45,41 @@ def _unit_cross_best(r0x, r0y, r0z, r1x, r1y, r1z, r2x, r2y, r2z, out):
     else:
         d, x, y, z = dc, cx, cy, cz
     if d <= 0.0:
-        return False
+        return 0.0, 0.0, 0.0, False
     s = 1.0 / math.sqrt(d)
-    out[0] = x * s
-    out[1] = y * s
-    out[2] = z * s
-    return True
+    return x * s, y * s, z * s, True
 
 
 @nb.njit(cache=True, inline="always")
-def _orthogonal_pair(wx, wy, wz, u, v):
-    """Unit u, v with (u, v, w) orthonormal."""
+def _orthogonal_pair(wx, wy, wz):
+    """Unit u, v with (u, v, w) orthonormal, as two 3-tuples."""
     if abs(wx) > abs(wy):
         inv = 1.0 / math.sqrt(wx * wx + wz * wz)
-        u[0] = -wz * inv
-        u[1] = 0.0
-        u[2] = wx * inv
+        ux, uy, uz = -wz * inv, 0.0, wx * inv
     else:
         inv = 1.0 / math.sqrt(wy * wy + wz * wz)
-        u[0] = 0.0
-        u[1] = wz * inv
-        u[2] = -wy * inv
-    v[0] = wy * u[2] - wz * u[1]
-    v[1] = wz * u[0] - wx * u[2]
-    v[2] = wx * u[1] - wy * u[0]
+        ux, uy, uz = 0.0, wz * inv, -wy * inv
+    return (ux, uy, uz), (wy * uz - wz * uy, wz * ux - wx * uz, wx * uy - wy * ux)
 
 
-@nb.njit(cache=True)
-def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, work):
+@nb.njit(cache=True, inline="always")
+def _rayleigh(a00, a01, a02, a11, a12, a22, x, y, z):
+    """xᵀ A x for a unit vector x."""
+    return a00 * x * x + a11 * y * y + a22 * z * z + 2.0 * (a01 * x * y + a02 * x * z + a12 * y * z)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, want_v1=True):
     """Eigen-decomposition of a symmetric 3×3 matrix.
 
     Writes eigenvalues λ1 ≥ λ2 ≥ λ3 into ``lam`` (tiny negatives clipped to 0),
-    the unit eigenvector of λ1 into ``v1`` and of λ3 into ``v3`` (v2 = v3 × v1).
-    ``work`` is scratch space of at least 12 float64 (no allocation per call).
+    the unit eigenvector of λ3 into ``v3`` and, with ``want_v1``, the one of λ1
+    into ``v1`` (v2 = v3 × v1); without it ``v1`` is left untouched and the
+    solve is about a third cheaper.  Eigenvalues come
+    from the trigonometric solution of the characteristic cubic, eigenvectors
+    from Eberly's robust construction, and the final eigenvalues are the
+    Rayleigh quotients of the eigenvectors (error O(eps²) instead of the
+    O(eps·λ1) of the cubic, which matters for λ3 ≈ 0 on planes).
     """
     mx = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
     if mx == 0.0 or not np.isfinite(mx):
@@ -95,8 +98,7 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, work):
     b00 = a00 - q
     b11 = a11 - q
     b22 = a22 - q
-    off = a01 * a01 + a02 * a02 + a12 * a12
-    p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * off) / 6.0)
+    p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
     if p < 1e-15:
         # a multiple of the identity
         lam[0] = lam[1] = lam[2] = max(q * mx, 0.0)
@@ -111,83 +113,75 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, work):
     c02 = a02 * ip
     c12 = a12 * ip
     half_det = 0.5 * (c00 * (c11 * c22 - c12 * c12) - c01 * (c01 * c22 - c12 * c02) + c02 * (c01 * c12 - c11 * c02))
-    if half_det > 1.0:
-        half_det = 1.0
-    elif half_det < -1.0:
-        half_det = -1.0
+    half_det = min(max(half_det, -1.0), 1.0)
     phi = math.acos(half_det) / 3.0
-    beta2 = 2.0 * math.cos(phi)
-    beta0 = 2.0 * math.cos(phi + 2.0943951023931957)
+    cphi = math.cos(phi)
+    sphi = math.sqrt(max(1.0 - cphi * cphi, 0.0))  # phi in [0, pi/3]
+    # roots 2cos(phi + 2πk/3): the largest, the smallest (k = 1) and the middle one
+    beta2 = 2.0 * cphi
+    beta0 = -cphi - 1.7320508075688772 * sphi
     beta1 = -(beta0 + beta2)
-    e_hi = q + p * beta2
     e_mid = q + p * beta1
-    e_lo = q + p * beta0
-
-    w = work[0:3]
-    u = work[3:6]
-    v = work[6:9]
+    if not want_v1:
+        # normal only: v3 from the rows of A - λ3 I, λ3 as its Rayleigh quotient,
+        # λ1 from the cubic, λ2 from the trace
+        e_lo = q + p * beta0
+        wx, wy, wz, ok = _unit_cross_best(a00 - e_lo, a01, a02, a01, a11 - e_lo, a12, a02, a12, a22 - e_lo)
+        if not ok:
+            wx, wy, wz = 0.0, 0.0, 1.0
+        v3[0], v3[1], v3[2] = wx, wy, wz
+        l3 = min(_rayleigh(a00, a01, a02, a11, a12, a22, wx, wy, wz), e_mid)
+        l1 = q + p * beta2
+        lam[0] = max(l1 * mx, 0.0)
+        lam[1] = max((3.0 * q - l1 - l3) * mx, 0.0)
+        lam[2] = max(l3 * mx, 0.0)
+        return
     # first the eigenvector of the best separated eigenvalue
     first_is_hi = half_det >= 0.0
-    e0 = e_hi if first_is_hi else e_lo
-    ok = _unit_cross_best(a00 - e0, a01, a02, a01, a11 - e0, a12, a02, a12, a22 - e0, w)
+    e0 = q + p * (beta2 if first_is_hi else beta0)
+    wx, wy, wz, ok = _unit_cross_best(a00 - e0, a01, a02, a01, a11 - e0, a12, a02, a12, a22 - e0)
     if not ok:
-        w[0], w[1], w[2] = (1.0, 0.0, 0.0) if first_is_hi else (0.0, 0.0, 1.0)
-    # then the middle eigenvector inside the plane orthogonal to w
-    _orthogonal_pair(w[0], w[1], w[2], u, v)
-    # A u, A v
-    aux = a00 * u[0] + a01 * u[1] + a02 * u[2]
-    auy = a01 * u[0] + a11 * u[1] + a12 * u[2]
-    auz = a02 * u[0] + a12 * u[1] + a22 * u[2]
-    avx = a00 * v[0] + a01 * v[1] + a02 * v[2]
-    avy = a01 * v[0] + a11 * v[1] + a12 * v[2]
-    avz = a02 * v[0] + a12 * v[1] + a22 * v[2]
-    m00 = u[0] * aux + u[1] * auy + u[2] * auz - e_mid
-    m01 = u[0] * avx + u[1] * avy + u[2] * avz
-    m11 = v[0] * avx + v[1] * avy + v[2] * avz - e_mid
-    # (m00 m01; m01 m11) is singular: the middle eigenvector is the null vector
-    # (q, −p) of its larger row (p, q), expressed in the (u, v) basis
+        wx, wy, wz = (1.0, 0.0, 0.0) if first_is_hi else (0.0, 0.0, 1.0)
+    # then the middle eigenvector inside the plane orthogonal to w: the null vector
+    # (q, −p) of the larger row (p, q) of the singular 2×2 matrix (A − e_mid I) on (u, v)
+    (ux, uy, uz), (vx, vy, vz) = _orthogonal_pair(wx, wy, wz)
+    aux = a00 * ux + a01 * uy + a02 * uz
+    auy = a01 * ux + a11 * uy + a12 * uz
+    auz = a02 * ux + a12 * uy + a22 * uz
+    avx = a00 * vx + a01 * vy + a02 * vz
+    avy = a01 * vx + a11 * vy + a12 * vz
+    avz = a02 * vx + a12 * vy + a22 * vz
+    m00 = ux * aux + uy * auy + uz * auz - e_mid
+    m01 = ux * avx + uy * avy + uz * avz
+    m11 = vx * avx + vy * avy + vz * avz - e_mid
     if abs(m00) >= abs(m11):
-        p, qq = m00, m01
+        rp, rq = m00, m01
     else:
-        p, qq = m01, m11
-    mid = work[9:12]
-    mm = max(abs(p), abs(qq))
+        rp, rq = m01, m11
+    mm = max(abs(rp), abs(rq))
     if mm > 0.0:
-        p /= mm
-        qq /= mm
-        inv = 1.0 / math.sqrt(p * p + qq * qq)
-        for t in range(3):
-            mid[t] = (qq * u[t] - p * v[t]) * inv
+        rp /= mm
+        rq /= mm
+        s = 1.0 / math.sqrt(rp * rp + rq * rq)
+        mx_, my_, mz_ = (rq * ux - rp * vx) * s, (rq * uy - rp * vy) * s, (rq * uz - rp * vz) * s
     else:
-        for t in range(3):
-            mid[t] = u[t]
+        mx_, my_, mz_ = ux, uy, uz
     # third = first × mid
-    tx = w[1] * mid[2] - w[2] * mid[1]
-    ty = w[2] * mid[0] - w[0] * mid[2]
-    tz = w[0] * mid[1] - w[1] * mid[0]
+    tx = wy * mz_ - wz * my_
+    ty = wz * mx_ - wx * mz_
+    tz = wx * my_ - wy * mx_
     if first_is_hi:
-        v1[0], v1[1], v1[2] = w[0], w[1], w[2]
+        v1[0], v1[1], v1[2] = wx, wy, wz
         v3[0], v3[1], v3[2] = tx, ty, tz
     else:
-        v3[0], v3[1], v3[2] = w[0], w[1], w[2]
+        v3[0], v3[1], v3[2] = wx, wy, wz
         v1[0], v1[1], v1[2] = -tx, -ty, -tz
-    # Rayleigh quotients of the eigenvectors: error O(eps²) instead of the
-    # O(eps·λ1) of the trigonometric formula, which matters for λ3 ≈ 0 (planes)
-    r1 = _rayleigh(a00, a01, a02, a11, a12, a22, v1[0], v1[1], v1[2])
-    r3 = _rayleigh(a00, a01, a02, a11, a12, a22, v3[0], v3[1], v3[2])
-    r2 = _rayleigh(a00, a01, a02, a11, a12, a22, mid[0], mid[1], mid[2])
-    lam[0] = max(r1 * mx, 0.0)
-    lam[1] = max(r2 * mx, 0.0)
-    lam[2] = max(r3 * mx, 0.0)
+    lam[0] = max(_rayleigh(a00, a01, a02, a11, a12, a22, v1[0], v1[1], v1[2]) * mx, 0.0)
+    lam[1] = max(_rayleigh(a00, a01, a02, a11, a12, a22, mx_, my_, mz_) * mx, 0.0)
+    lam[2] = max(_rayleigh(a00, a01, a02, a11, a12, a22, v3[0], v3[1], v3[2]) * mx, 0.0)
 
 
-@nb.njit(cache=True, inline="always")
-def _rayleigh(a00, a01, a02, a11, a12, a22, x, y, z):
-    """xᵀ A x for a unit vector x."""
-    return a00 * x * x + a11 * y * y + a22 * z * z + 2.0 * (a01 * x * y + a02 * x * z + a12 * y * z)
-
-
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def eigen_features(lam, v3z, convention, col, out):
     """Write the eigen and Westin features (SPEC §3) for eigenvalues ``lam``.
 
@@ -211,19 +205,22 @@ def eigen_features(lam, v3z, convention, col, out):
     S.put(out, col, S.SPHERICITY, l3 / l1)
     S.put(out, col, S.ANISOTROPY, (l1 - l3) / l1)
     S.put(out, col, S.SURFACE_VARIATION, e3)
-    if convention == CONV_CLOUDCOMPARE:
-        a1, a2, a3 = l1, l2, l3
-    else:
-        a1, a2, a3 = e1, e2, e3
-    S.put(out, col, S.OMNIVARIANCE, (a1 * a2 * a3) ** (1.0 / 3.0))
-    ent = 0.0
-    if a1 > 0.0:
-        ent -= a1 * math.log(a1)
-    if a2 > 0.0:
-        ent -= a2 * math.log(a2)
-    if a3 > 0.0:
-        ent -= a3 * math.log(a3)
-    S.put(out, col, S.EIGENENTROPY, ent)
+    want_omni = col[S.OMNIVARIANCE] >= 0
+    want_ent = col[S.EIGENENTROPY] >= 0
+    if want_omni or want_ent:
+        if convention == CONV_CLOUDCOMPARE:
+            a1, a2, a3 = l1, l2, l3
+        else:
+            a1, a2, a3 = e1, e2, e3
+        # one logarithm per eigenvalue serves both (0·ln 0 = 0; a zero makes omnivariance 0)
+        g1 = math.log(a1) if a1 > 0.0 else 0.0
+        g2 = math.log(a2) if a2 > 0.0 else 0.0
+        g3 = math.log(a3) if a3 > 0.0 else 0.0
+        if want_omni:
+            omni = math.exp((g1 + g2 + g3) / 3.0) if (a1 > 0.0 and a2 > 0.0 and a3 > 0.0) else 0.0
+            S.put(out, col, S.OMNIVARIANCE, omni)
+        if want_ent:
+            S.put(out, col, S.EIGENENTROPY, -(a1 * g1 + a2 * g2 + a3 * g3))
     if l1 > l3:
         S.put(out, col, S.SFFI_X, (l1 - l2) / (l1 - l3))
     S.put(out, col, S.SFFI_Y, l3 / l1)

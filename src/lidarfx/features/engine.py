@@ -167,6 +167,17 @@ def point_features(
     want_hist = S.any_requested(col, S.DH_PEAKS, S.DH_MAX_BIN)
     want_dist = S.any_requested(col, S.OCTANT_OCCUPANCY, S.Z_ASYMMETRY)
     want_plane_counts = col[S.PLANE_INLIER_RATIO] >= 0 or col[S.ECHO_RATIO_SLOPE] >= 0
+    # what the closed-form eigen solve is needed for (nothing else pays for it)
+    want_eigen = S.any_requested(col, S.EIGENVALUE1, S.WESTIN_SPHERICAL)
+    want_slope = col[S.SLOPE] >= 0 or col[S.ASPECT] >= 0 or col[S.ECHO_RATIO_SLOPE] >= 0
+    need_v1 = want_curv or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
+    need_solve = (
+        want_eigen
+        or S.any_requested(col, S.NORMAL_X, S.PLANE_INLIER_RATIO)
+        or want_slope
+        or want_curv
+        or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
+    )
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
     for ch in nb.prange(nchunk):
@@ -234,11 +245,11 @@ def point_features(
                     cy = acc[_SY] / n
                     cz = acc[_SZ] / n
                     S.put(o, col, S.CENTROID_OFFSET, math.sqrt(cx * cx + cy * cy + cz * cz) / r)
-                if n >= 3.0:
+                if n >= 3.0 and need_solve:
                     eigh3(
                         acc[_XX] / n - cx * cx, acc[_XY] / n - cx * cy, acc[_XZ] / n - cx * cz,
                         acc[_YY] / n - cy * cy, acc[_YZ] / n - cy * cz, acc[_ZZ] / n - cz * cz,
-                        lam, v1, v3, work,
+                        lam, v1, v3, need_v1,
                     )
                     # orient the normal: towards the scanner, else up
                     nxv, nyv, nzv = v3[0], v3[1], v3[2]
@@ -247,13 +258,15 @@ def point_features(
                             nxv, nyv, nzv = -nxv, -nyv, -nzv
                     elif nzv < 0.0:
                         nxv, nyv, nzv = -nxv, -nyv, -nzv
-                    eigen_features(lam, nzv, convention, col, o)
-                    slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
+                    if want_eigen:
+                        eigen_features(lam, nzv, convention, col, o)
+                    if want_slope:
+                        slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
                     S.put(o, col, S.NORMAL_X, nxv)
                     S.put(o, col, S.NORMAL_Y, nyv)
                     S.put(o, col, S.NORMAL_Z, nzv)
                     S.put(o, col, S.SLOPE, slope)
-                    if slope >= 0.1:
+                    if slope >= 0.1 and col[S.ASPECT] >= 0:
                         sg = 1.0 if nzv >= 0.0 else -1.0  # aspect of the up-facing normal
                         S.put(o, col, S.ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
                     S.put(o, col, S.PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))

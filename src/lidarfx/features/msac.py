@@ -53,7 +53,6 @@ def msac_features(
         lam = np.empty(3)
         v1 = np.empty(3)
         v3 = np.empty(3)
-        work = np.empty(12)
         for i in range(start + ch * chunk, min(stop, start + ch * chunk + chunk)):
             r = rad[i if per_point else 0, scale]
             r2 = r * r
@@ -143,7 +142,7 @@ def msac_features(
                     cyy += ey * ey
                     cyz += ey * ez
                     czz += ez * ez
-            eigh3(cxx / ninl, cxy / ninl, cxz / ninl, cyy / ninl, cyz / ninl, czz / ninl, lam, v1, v3, work)
+            eigh3(cxx / ninl, cxy / ninl, cxz / ninl, cyy / ninl, cyz / ninl, czz / ninl, lam, v1, v3, False)
             nxv, nyv, nzv = v3[0], v3[1], v3[2]
             if has_scanner:
                 if nxv * (scanner[0] - qx) + nyv * (scanner[1] - qy) + nzv * (scanner[2] - qz) < 0.0:

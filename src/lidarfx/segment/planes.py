@@ -86,7 +86,6 @@ def _grow(
     lam = np.empty(3)
     v1 = np.empty(3)
     v3 = np.empty(3)
-    work = np.empty(16)
     r2 = r_grow * r_grow
     nseg = 0
     for t0 in range(seeds.shape[0]):
@@ -154,7 +153,7 @@ def _grow(
                         step = max(step, 1)
                         next_refit = tail + step
                         inv = 1.0 / tail
-                        eigh3(sxx * inv, sxy * inv, sxz * inv, syy * inv, syz * inv, szz * inv, lam, v1, v3, work)
+                        eigh3(sxx * inv, sxy * inv, sxz * inv, syy * inv, syz * inv, szz * inv, lam, v1, v3, False)
                         if lam[1] > 4.0 * lam[2] and np.isfinite(lam[2]):
                             ux, uy, uz = v3[0], v3[1], v3[2]
                             cx, cy, cz = ox + mx, oy + my, oz + mz
@@ -162,7 +161,7 @@ def _grow(
         if not release and min_width > 0.0:
             # equivalent width of the segment: sqrt(12 λ2) (a w-wide strip has λ2 = w²/12)
             inv = 1.0 / tail
-            eigh3(sxx * inv, sxy * inv, sxz * inv, syy * inv, syz * inv, szz * inv, lam, v1, v3, work)
+            eigh3(sxx * inv, sxy * inv, sxz * inv, syy * inv, syz * inv, szz * inv, lam, v1, v3, False)
             release = 12.0 * lam[1] < min_width * min_width
         if release:
             for t in range(tail):
