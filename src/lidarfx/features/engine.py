@@ -35,6 +35,7 @@ from . import slots as S
 from .curvature import quadric_curvatures
 from .eigen import eigen_features, eigh3
 from .histogram import histogram_features
+from .plane import orient_normal, write_plane
 
 KIND_SPHERE = 0
 KIND_CYLINDER = 1
@@ -251,25 +252,10 @@ def point_features(
                         acc[_YY] / n - cy * cy, acc[_YZ] / n - cy * cz, acc[_ZZ] / n - cz * cz,
                         lam, v1, v3, need_v1,
                     )
-                    # orient the normal: towards the scanner, else up
-                    nxv, nyv, nzv = v3[0], v3[1], v3[2]
-                    if has_scanner:
-                        if nxv * (scanner[0] - qx) + nyv * (scanner[1] - qy) + nzv * (scanner[2] - qz) < 0.0:
-                            nxv, nyv, nzv = -nxv, -nyv, -nzv
-                    elif nzv < 0.0:
-                        nxv, nyv, nzv = -nxv, -nyv, -nzv
+                    nxv, nyv, nzv = orient_normal(v3[0], v3[1], v3[2], qx, qy, qz, scanner, has_scanner)
                     if want_eigen:
                         eigen_features(lam, nzv, convention, col, o)
-                    if want_slope:
-                        slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
-                    S.put(o, col, S.NORMAL_X, nxv)
-                    S.put(o, col, S.NORMAL_Y, nyv)
-                    S.put(o, col, S.NORMAL_Z, nzv)
-                    S.put(o, col, S.SLOPE, slope)
-                    if slope >= 0.1 and col[S.ASPECT] >= 0:
-                        sg = 1.0 if nzv >= 0.0 else -1.0  # aspect of the up-facing normal
-                        S.put(o, col, S.ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
-                    S.put(o, col, S.PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
+                    slope = write_plane(o, col, S.NORMAL_X, nxv, nyv, nzv, cx, cy, cz)
                     S.put(o, col, S.PLANE_STD, math.sqrt(lam[2]))
                     e1x, e1y, e1z = v1[0], v1[1], v1[2]
                     if e1z < 0.0 or (e1z == 0.0 and e1x < 0.0):

@@ -19,6 +19,7 @@ import numpy as np
 from ..neighbors import G_DX, G_DY, G_DZ, column_ranges, gather
 from . import slots as S
 from .eigen import eigh3
+from .plane import orient_normal, write_plane
 
 
 @nb.njit(cache=True, inline="always")
@@ -143,12 +144,7 @@ def msac_features(
                     cyz += ey * ez
                     czz += ez * ez
             eigh3(cxx / ninl, cxy / ninl, cxz / ninl, cyy / ninl, cyz / ninl, czz / ninl, lam, v1, v3, False)
-            nxv, nyv, nzv = v3[0], v3[1], v3[2]
-            if has_scanner:
-                if nxv * (scanner[0] - qx) + nyv * (scanner[1] - qy) + nzv * (scanner[2] - qz) < 0.0:
-                    nxv, nyv, nzv = -nxv, -nyv, -nzv
-            elif nzv < 0.0:
-                nxv, nyv, nzv = -nxv, -nyv, -nzv
+            nxv, nyv, nzv = orient_normal(v3[0], v3[1], v3[2], qx, qy, qz, scanner, has_scanner)
             # inliers of the refined plane
             ss = 0.0
             nin2 = 0
@@ -158,15 +154,7 @@ def msac_features(
                     ss += e * e
                     nin2 += 1
             o = out[scale, :, i]
-            slope = math.degrees(math.acos(min(abs(nzv), 1.0)))
-            S.put(o, col, S.MSAC_NORMAL_X, nxv)
-            S.put(o, col, S.MSAC_NORMAL_Y, nyv)
-            S.put(o, col, S.MSAC_NORMAL_Z, nzv)
-            S.put(o, col, S.MSAC_SLOPE, slope)
-            if slope >= 0.1:
-                sg = 1.0 if nzv >= 0.0 else -1.0
-                S.put(o, col, S.MSAC_ASPECT, math.degrees(math.atan2(sg * nxv, sg * nyv)) % 360.0)
-            S.put(o, col, S.MSAC_PLANE_DISTANCE, -(cx * nxv + cy * nyv + cz * nzv))
+            write_plane(o, col, S.MSAC_NORMAL_X, nxv, nyv, nzv, cx, cy, cz)
             if nin2 > 0:
                 S.put(o, col, S.MSAC_PLANE_STD, math.sqrt(ss / nin2))
             S.put(o, col, S.MSAC_INLIER_RATIO, nin2 / cnt)

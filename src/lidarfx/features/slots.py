@@ -50,6 +50,9 @@ NAMES: tuple[str, ...] = (
     "msac_plane_distance", "msac_plane_std", "msac_inlier_ratio",
 )
 assert len(NAMES) == NSLOTS
+# plane.write_plane relies on these six consecutive slots
+assert (SLOPE, ASPECT, PLANE_DISTANCE) == (NORMAL_X + 3, NORMAL_X + 4, NORMAL_X + 5)
+assert (MSAC_SLOPE, MSAC_ASPECT, MSAC_PLANE_DISTANCE) == (MSAC_NORMAL_X + 3, MSAC_NORMAL_X + 4, MSAC_NORMAL_X + 5)
 
 #: feature groups (what ``--features eigen,plane`` selects)
 GROUPS: dict[str, tuple[int, ...]] = {

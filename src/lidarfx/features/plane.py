@@ -1,0 +1,49 @@
+"""Local-plane features shared by the ordinary (PCA) and the robust (MSAC) plane.
+
+Normal orientation: towards the scanner when one is given (TLS), else up.
+Slope = arccos |n_z| in degrees; aspect = atan2(n_x, n_y) of the up-facing
+normal, clockwise from North, NaN below 0.1° of slope; plane distance =
+signed distance of the query point to the plane, (p − c)·n.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+from . import slots as S
+
+
+@nb.njit(cache=True, inline="always")
+def orient_normal(nx, ny, nz, qx, qy, qz, scanner, has_scanner):
+    """The normal flipped towards ``scanner`` (local coordinates) or, without one, up."""
+    if has_scanner:
+        if nx * (scanner[0] - qx) + ny * (scanner[1] - qy) + nz * (scanner[2] - qz) < 0.0:
+            return -nx, -ny, -nz
+    elif nz < 0.0:
+        return -nx, -ny, -nz
+    return nx, ny, nz
+
+
+@nb.njit(cache=True, inline="always")
+def slope_deg(nz):
+    return math.degrees(math.acos(min(abs(nz), 1.0)))
+
+
+@nb.njit(cache=True)
+def write_plane(o, col, first, nx, ny, nz, cx, cy, cz):
+    """Write normal x/y/z, slope, aspect and plane distance into the six consecutive
+    slots starting at ``first`` (NORMAL_X or MSAC_NORMAL_X); returns the slope.
+
+    (cx, cy, cz) is the plane's centroid relative to the query point.
+    """
+    slope = slope_deg(nz)
+    S.put(o, col, first, nx)
+    S.put(o, col, first + 1, ny)
+    S.put(o, col, first + 2, nz)
+    S.put(o, col, first + 3, slope)
+    if slope >= 0.1 and col[first + 4] >= 0:
+        sg = 1.0 if nz >= 0.0 else -1.0  # aspect of the up-facing normal
+        S.put(o, col, first + 4, math.degrees(math.atan2(sg * nx, sg * ny)) % 360.0)
+    S.put(o, col, first + 5, -(cx * nx + cy * ny + cz * nz))
+    return slope
