@@ -352,3 +352,16 @@ def test_cli_segment_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "max_angle" in err[0]
     assert not (tmp_path / "o.laz").exists()
+
+
+def test_cli_picture(tmp_path):
+    """--picture draws the segments: a PNG with real content next to the outputs."""
+    import lidarfx
+    from lidarfx.cli import main
+
+    src = tmp_path / "plane.las"
+    lidarfx.write(lidarfx.synth.plane(2.0, density=2000.0, noise=0.002, seed=1), src)
+    png = tmp_path / "seg.png"
+    assert main(["segment", str(src), str(tmp_path / "seg.las"), "--picture", str(png), "-q"]) == 0
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000

@@ -110,13 +110,3 @@ def hull_area_in_plane(points: np.ndarray, normal: Any) -> float:
         return float(ConvexHull(uv).volume)  # in 2-D, 'volume' is the area
     except (QhullError, ValueError):
         return 0.0
-
-
-def angle_between(a: Any, b: Any, axial: bool = True) -> Any:
-    """Angle in degrees between vectors (rows); ``axial`` treats v and −v as the same direction."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    cos = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
-    if axial:
-        cos = np.abs(cos)
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))

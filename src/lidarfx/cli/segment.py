@@ -5,6 +5,7 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
 from ._args import xyz
 
@@ -54,6 +55,7 @@ def register(sub) -> None:
     p.add_argument("--keep-features", action="store_true", help="also write normal_x/y/z and plane_std")
     p.add_argument("--table", default=None, metavar="PATH", help="table path stem: writes PATH.csv and PATH.json (default OUT.segments)")
     p.add_argument("--no-table", action="store_true", help="do not write the per-segment table")
+    p.add_argument("--picture", default=None, metavar="PNG", help="also draw the segments (top view, one colour each) into this PNG")
     p.add_argument("--top", type=int, default=10, help="segments listed in the summary, default %(default)s")
     p.add_argument("--columns", default=None, help="column spec for text input, e.g. x,y,z,intensity")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -108,6 +110,10 @@ def run(args) -> int:
         csv_path, json_path = _table_paths(args)
         write_segments_csv(rows, csv_path)
         write_segments_json(rows, json_path, meta)
+    if args.picture:
+        from ..render import segment_view
+
+        segment_view(out, args.picture, height_panel=True, title=f"{Path(args.input).name}: {len(rows)} segments")
     t4 = time.perf_counter()
 
     n = len(out)
@@ -118,6 +124,7 @@ def run(args) -> int:
         "output": str(args.output),
         "table_csv": csv_path,
         "table_json": json_path,
+        "picture": args.picture,
         "points": n,
         "segments": len(rows),
         "segmented_points": nseg_pts,

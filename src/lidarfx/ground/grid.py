@@ -45,10 +45,6 @@ class GridSpec:
     def shape(self) -> tuple[int, int]:
         return (self.ny, self.nx)
 
-    def centres(self) -> tuple[np.ndarray, np.ndarray]:
-        """Cell-centre x (nx,) and y (ny,) in local coordinates."""
-        return (np.arange(self.nx) + 0.5) * self.cell, (np.arange(self.ny) + 0.5) * self.cell
-
 
 def cell_index(xy: np.ndarray, spec: GridSpec) -> tuple[np.ndarray, np.ndarray]:
     """Row and column of each local xy point (clipped into the grid)."""
