@@ -21,3 +21,19 @@ def xyz(text: str) -> list[float]:
         return numbers(text, 3, "a position x,y,z")
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def read_input(args):
+    """Read ``args.input`` for a command that writes ``args.output``.
+
+    Refuses an output that is the input (inputs are never modified), applies the
+    ``--columns`` spec of text input and shows progress unless ``-q``.  Returns
+    ``(cloud, progress)``; ``progress`` is what to pass on to the later steps.
+    """
+    from .. import io
+    from .._atomic import check_not_same_file
+
+    check_not_same_file(args.input, args.output)
+    progress = False if args.quiet else None
+    columns = args.columns.split(",") if getattr(args, "columns", None) else None
+    return io.read(args.input, columns=columns, progress=progress), progress

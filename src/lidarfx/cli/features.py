@@ -6,7 +6,7 @@ import json
 import sys
 import time
 
-from ._args import xyz
+from ._args import read_input, xyz
 
 EPILOG = """examples:
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
@@ -62,13 +62,10 @@ def run(args) -> int:
     import numpy as np
 
     from .. import io
-    from .._atomic import check_not_same_file
     from ..features import compute_features
 
-    check_not_same_file(args.input, args.output)
-    progress = False if args.quiet else None
     t0 = time.perf_counter()
-    cloud = io.read(args.input, columns=args.columns.split(",") if args.columns else None, progress=progress)
+    cloud, progress = read_input(args)
     t1 = time.perf_counter()
     radii = args.radius or []
     if args.neighbourhood != "knn" and not radii:

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._args import xyz
+from ._args import read_input, xyz
 
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
@@ -73,7 +73,6 @@ def _table_paths(args) -> tuple[str, str]:
 
 def run(args) -> int:
     from .. import io
-    from .._atomic import check_not_same_file
     from ..segment import (
         segment_planes,
         segments_table,
@@ -81,10 +80,8 @@ def run(args) -> int:
         write_segments_json,
     )
 
-    check_not_same_file(args.input, args.output)
-    progress = False if args.quiet else None
     t0 = time.perf_counter()
-    cloud = io.read(args.input, columns=args.columns.split(",") if args.columns else None, progress=progress)
+    cloud, progress = read_input(args)
     t1 = time.perf_counter()
     out = segment_planes(
         cloud,

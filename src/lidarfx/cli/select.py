@@ -6,6 +6,8 @@ import json
 import sys
 import time
 
+from ._args import read_input
+
 EPILOG = """examples:
   lidarfx select seg.laz planes.laz --where "segment_id >= 0 and segment_size > 50 and planarity > 0.5"
   lidarfx select in.laz ground.laz --where "classification in [2, 9]"
@@ -41,14 +43,11 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from .. import io
-    from .._atomic import check_not_same_file
     from ..select import evaluate, parse
 
     expr = parse(args.where)  # syntax errors before reading a large file
-    check_not_same_file(args.input, args.output)
-    progress = False if args.quiet else None
     t0 = time.perf_counter()
-    cloud = io.read(args.input, columns=args.columns.split(",") if args.columns else None, progress=progress)
+    cloud, progress = read_input(args)
     t1 = time.perf_counter()
     mask = evaluate(cloud, expr)
     if args.invert:
