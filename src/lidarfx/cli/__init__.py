@@ -11,7 +11,7 @@ import sys
 
 from ..errors import EXIT_USAGE, LidarfxError
 
-COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground"]
+COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify"]
 
 EPILOG = """examples:
   lidarfx demo                                   # run the main job on the bundled sample

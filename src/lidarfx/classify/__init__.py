@@ -1,0 +1,53 @@
+"""Supervised point classification (SPEC §5, seed 001).
+
+Public API
+----------
+:func:`train`                  fit a classifier on labelled clouds → :class:`ClassifierModel`
+:func:`load_model`             load a model file (skops, trusted types only)
+:class:`ClassifierModel`       ``predict`` / ``classify`` / ``save``
+:class:`LidarFeatures`         scikit-learn transformer: clouds → feature matrix
+:func:`make_pipeline`          ``Pipeline(LidarFeatures → impute → classifier)``
+:class:`ClassMap`              class merging / ignoring (``"2,3+4+5,6"``)
+:func:`evaluate`               CV (random and spatial-block folds), leave-one-file-out, transfer
+:func:`metrics`                OA, kappa, PA, UA, F1, IoU from a confusion matrix
+
+See ``docs/classification.md``.
+"""
+from __future__ import annotations
+
+from .classes import ASPRS_NAMES, DEFAULT_IGNORE, ClassMap
+from .evaluate import (
+    block_folds,
+    confusion_matrix,
+    evaluate,
+    evaluate_model,
+    format_report,
+    metrics,
+    plot_confusion,
+    random_folds,
+    write_report,
+)
+from .importance import backward_elimination, impurity_importance, permutation_importance
+from .model import TRUSTED_TYPES, ClassifierModel, TrainConfig, load_model, read_sources, train
+from .pipeline import (
+    CLASSIFIERS,
+    DEFAULT_FEATURES,
+    DEFAULT_RADII,
+    EXTRA_INPUTS,
+    CloudSample,
+    LidarFeatures,
+    balanced_sample,
+    make_classifier,
+    make_pipeline,
+    usable_mask,
+)
+
+__all__ = [
+    "ASPRS_NAMES", "DEFAULT_IGNORE", "ClassMap",
+    "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "format_report", "metrics",
+    "plot_confusion", "random_folds", "write_report",
+    "backward_elimination", "impurity_importance", "permutation_importance",
+    "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",
+    "CLASSIFIERS", "DEFAULT_FEATURES", "DEFAULT_RADII", "EXTRA_INPUTS", "CloudSample", "LidarFeatures",
+    "balanced_sample", "make_classifier", "make_pipeline", "usable_mask",
+]

@@ -1,0 +1,540 @@
+"""Honest evaluation: metrics, random and spatial-block folds, transfer, reports.
+
+Confusion matrix layout (everywhere in lidarfx): **rows = reference, columns =
+predicted**; ``cm[i, j]`` = points of reference class i predicted as class j.
+
+* overall accuracy OA = Σ cm_ii / N
+* Cohen's kappa κ = (OA − p_e) / (1 − p_e), p_e = Σ_i (row_i · col_i) / N²
+* producer's accuracy PA_i = cm_ii / row_i (recall), user's accuracy UA_i = cm_ii / col_i
+  (precision), F1_i = 2 cm_ii / (row_i + col_i) (= 2·PA·UA / (PA + UA)),
+  IoU_i = cm_ii / (row_i + col_i − cm_ii), support_i = row_i
+* mean F1 / mean IoU: over the classes present in the reference (support > 0)
+
+Undefined ratios (0 / 0) are NaN (``null`` in JSON).
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from .. import __version__
+from ..errors import LidarfxError
+from .classes import ClassMap
+from .model import (
+    ClassifierModel,
+    Source,
+    TrainConfig,
+    _labels,
+    read_sources,
+    resolve_classes,
+    sheared_sources,
+    train,
+)
+from .pipeline import CloudSample, balanced_sample
+
+__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "cross_validate",
+           "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
+
+LAYOUT = "rows = reference, columns = predicted"
+
+
+# --------------------------------------------------------------------------- metrics
+def confusion_matrix(reference: np.ndarray, predicted: np.ndarray, n_classes: int) -> np.ndarray:
+    """k × k counts, rows = reference, columns = predicted; points with reference < 0 are ignored."""
+    ref = np.asarray(reference, dtype=np.int64).ravel()
+    pred = np.asarray(predicted, dtype=np.int64).ravel()
+    if ref.shape != pred.shape:
+        raise LidarfxError(f"reference and prediction differ in length ({len(ref)} vs {len(pred)})")
+    keep = ref >= 0
+    ref, pred = ref[keep], pred[keep]
+    if ref.size and (ref.max() >= n_classes or pred.min() < 0 or pred.max() >= n_classes):
+        raise LidarfxError("class index out of range in the confusion matrix")
+    return np.bincount(ref * n_classes + pred, minlength=n_classes * n_classes).reshape(n_classes, n_classes)
+
+
+def _div(a: float, b: float) -> float:
+    return float(a) / float(b) if b else float("nan")
+
+
+def metrics(cm: Any, names: Sequence[str] | None = None, codes: Sequence[Any] | None = None) -> dict[str, Any]:
+    """OA, kappa, mean F1 / IoU and per-class PA, UA, F1, IoU, support from a confusion matrix."""
+    cm = np.asarray(cm, dtype=np.int64)
+    if cm.ndim != 2 or cm.shape[0] != cm.shape[1]:
+        raise LidarfxError(f"confusion matrix must be square, got shape {cm.shape}")
+    k = cm.shape[0]
+    names = list(names) if names is not None else [str(i) for i in range(k)]
+    codes = list(codes) if codes is not None else list(range(k))
+    n = int(cm.sum())
+    diag = np.diag(cm).astype(float)
+    rows = cm.sum(axis=1).astype(float)
+    cols = cm.sum(axis=0).astype(float)
+    oa = _div(diag.sum(), n)
+    pe = float((rows * cols).sum()) / float(n) ** 2 if n else float("nan")
+    if n and 1.0 - pe > 1e-15:
+        kappa = (oa - pe) / (1.0 - pe)
+    else:
+        kappa = 1.0 if n and oa == 1.0 else float("nan")
+    per = []
+    for i in range(k):
+        per.append({
+            "index": i, "name": names[i], "code": codes[i],
+            "support": int(rows[i]), "predicted": int(cols[i]),
+            "pa": _div(diag[i], rows[i]), "ua": _div(diag[i], cols[i]),
+            "f1": _div(2 * diag[i], rows[i] + cols[i]),
+            "iou": _div(diag[i], rows[i] + cols[i] - diag[i]),
+        })
+    present = [p for p in per if p["support"] > 0]
+    mean = lambda key: float(np.mean([p[key] for p in present])) if present else float("nan")  # noqa: E731
+    return {"points": n, "oa": oa, "kappa": kappa, "mean_f1": mean("f1"), "mean_iou": mean("iou"),
+            "classes": per, "confusion": cm.tolist(), "layout": LAYOUT}
+
+
+def _metrics_for(cm: np.ndarray, cmap: ClassMap) -> dict[str, Any]:
+    return metrics(cm, list(cmap.names), ["+".join(str(c) for c in g) for g in cmap.groups])
+
+
+# --------------------------------------------------------------------------- folds
+def random_folds(n: int, n_folds: int, seed: int = 0, y: np.ndarray | None = None) -> np.ndarray:
+    """Fold id (0..n_folds−1) of every point: random, stratified by ``y`` when given."""
+    from sklearn.model_selection import KFold, StratifiedKFold
+
+    if n_folds < 2:
+        raise LidarfxError("cross-validation needs at least 2 folds")
+    if n < n_folds:
+        raise LidarfxError(f"{n} points cannot make {n_folds} folds")
+    folds = np.empty(n, dtype=np.int64)
+    if y is not None:
+        y = np.asarray(y)
+        _, counts = np.unique(y, return_counts=True)
+        if counts.min() >= n_folds:
+            split = StratifiedKFold(n_folds, shuffle=True, random_state=seed).split(np.zeros(n), y)
+        else:
+            split = KFold(n_folds, shuffle=True, random_state=seed).split(np.zeros(n))
+    else:
+        split = KFold(n_folds, shuffle=True, random_state=seed).split(np.zeros(n))
+    for f, (_, te) in enumerate(split):
+        folds[te] = f
+    return folds
+
+
+def block_folds(xy: np.ndarray, n_folds: int, block_size: float, seed: int = 0,
+                groups: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Spatial-block folds: ``(fold, block)`` ids per point.
+
+    The plane is cut into square blocks of ``block_size`` (aligned to multiples
+    of it, so neighbouring tiles share the grid; ``groups`` — e.g. a file id —
+    keeps blocks of different files apart).  Whole blocks go to folds: shuffled
+    with ``seed``, each block joins the fold holding the fewest points so far.
+    No block is ever split between folds.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    if n_folds < 2:
+        raise LidarfxError("cross-validation needs at least 2 folds")
+    if not (block_size > 0 and math.isfinite(block_size)):
+        raise LidarfxError(f"block size must be a positive number of metres, got {block_size!r}")
+    bx = np.floor(xy[:, 0] / block_size).astype(np.int64)
+    by = np.floor(xy[:, 1] / block_size).astype(np.int64)
+    g = np.zeros(len(xy), np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
+    key = np.stack([g, bx, by], axis=1)
+    _, block, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    block = block.ravel()
+    nb = len(counts)
+    if nb < n_folds:
+        raise LidarfxError(f"only {nb} spatial block(s) of {block_size:g} m for {n_folds} folds; "
+                           "use smaller blocks or fewer folds")
+    order = np.random.default_rng(seed).permutation(nb)
+    load = np.zeros(n_folds, np.int64)
+    fold_of_block = np.empty(nb, np.int64)
+    for b in order:
+        f = int(np.argmin(load))
+        fold_of_block[b] = f
+        load[f] += counts[b]
+    return fold_of_block[block], block
+
+
+def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: TrainConfig, n_classes: int,
+                   log: Callable[[str], None] | None = None, X_aug: Sequence[np.ndarray] = ()
+                   ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
+    """Train on all folds but one (balanced sample, as :func:`train` does), predict the
+    held-out fold, for every fold.  ``X_aug``: features of the same points in
+    terrain-sheared copies; the training part of each fold adds a balanced sample
+    of them like :func:`train`.  Returns the summed confusion matrix, per-fold
+    results and the fitted estimators with their held-out indices."""
+    from .model import _aug_cap
+
+    cm = np.zeros((n_classes, n_classes), np.int64)
+    per_fold, fitted = [], []
+    for f in np.unique(folds):
+        tr = np.flatnonzero((folds != f) & (y >= 0))
+        te = np.flatnonzero((folds == f) & (y >= 0))
+        if not len(te):
+            continue
+        s = tr[balanced_sample(y[tr], config.max_per_class, config.seed)]
+        t0 = time.perf_counter()
+        Xf, yf = X[s], y[s]
+        for a, Xa in enumerate(X_aug):
+            sa = tr[balanced_sample(y[tr], _aug_cap(config), config.seed + 1 + a)]
+            Xf, yf = np.vstack([Xf, Xa[sa]]), np.concatenate([yf, y[sa]])
+        est = config.fit_matrix(Xf, yf)
+        pred = est.predict(X[te])
+        c = confusion_matrix(y[te], pred, n_classes)
+        cm += c
+        m = metrics(c)
+        per_fold.append({"fold": int(f), "train_points": int(len(s)), "test_points": int(len(te)),
+                         "oa": m["oa"], "kappa": m["kappa"], "mean_f1": m["mean_f1"],
+                         "seconds": round(time.perf_counter() - t0, 3)})
+        per_fold[-1]["train_points"] = int(len(yf))
+        fitted.append((est, te))
+        if log:
+            log(f"  fold {int(f)}: train {len(s):,} / test {len(te):,} points, OA {m['oa']:.4f}, "
+                f"mean F1 {m['mean_f1']:.4f}")
+    return cm, per_fold, fitted
+
+
+# --------------------------------------------------------------------------- evaluation
+def _file_features(sources: list[Source], cmap: ClassMap, config: TrainConfig, progress: bool | None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Features, labels, xy and file id of every labelled point of every source."""
+    tr = config.transformer(progress=progress)
+    Xs, ys, xys, gs = [], [], [], []
+    for i, s in enumerate(sources):
+        y = _labels(s, cmap)
+        idx = np.flatnonzero(y >= 0)
+        Xs.append(tr.transform(CloudSample(s.cloud, idx)))
+        ys.append(y[idx])
+        xys.append(s.cloud.xyz[idx, :2])
+        gs.append(np.full(len(idx), i, np.int64))
+    return np.vstack(Xs), np.concatenate(ys).astype(np.int64), np.vstack(xys), np.concatenate(gs)
+
+
+def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | None = False,
+                   log: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Metrics of a trained model on labelled clouds: per file and pooled.
+
+    Every usable point is classified (features use all of them as neighbours);
+    only points whose reference class is in the model's class map count.
+    """
+    srcs = read_sources(sources, progress=progress)
+    cmap = model.classes
+    k = len(cmap)
+    total = np.zeros((k, k), np.int64)
+    files = {}
+    t0 = time.perf_counter()
+    for s in srcs:
+        t = time.perf_counter()
+        y = _labels(s, cmap)
+        codes = model.predict(s.cloud, progress=progress)
+        pred = cmap.index_of(np.clip(codes, 0, 255))
+        cm = confusion_matrix(y, np.where(y >= 0, pred, 0), k)
+        total += cm
+        m = _metrics_for(cm, cmap)
+        m["seconds"] = round(time.perf_counter() - t, 3)
+        m["ignored_points"] = int((y < 0).sum())
+        m["unusable_points"] = int(s.n_total - len(s.cloud))
+        files[s.name] = m
+        if log:
+            log(f"  {Path(s.name).name}: {m['points']:,} points, OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f} "
+                f"({m['seconds']:.1f} s)")
+    pooled = _metrics_for(total, cmap)
+    return {"title": "trained model on test files", "files": files, "metrics": pooled,
+            "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def evaluate(
+    sources: Any,
+    *,
+    test: Any = None,
+    cv: int | None = 3,
+    block_size: float | None = 20.0,
+    random_cv: bool = True,
+    leave_one_out: bool = False,
+    classes: Any = None,
+    ignore: Iterable[int] | None = None,
+    config: TrainConfig | None = None,
+    importance: bool = False,
+    eliminate: bool = False,
+    cv_seed: int = 0,
+    progress: bool | None = False,
+    log: Callable[[str], None] | None = None,
+    **params: Any,
+) -> dict[str, Any]:
+    """Evaluate a classifier configuration on labelled clouds; returns a report dict.
+
+    Sections (each with the pooled confusion matrix and all metrics):
+
+    * ``cv_random`` — ``cv``-fold cross-validation with random (stratified) folds
+      (when ``random_cv``); neighbouring points fall into different folds, so it
+      is optimistic.
+    * ``cv_blocks`` — ``cv``-fold cross-validation with spatial blocks of
+      ``block_size`` m (when ``block_size``).
+    * ``leave_one_file_out`` — train on all files but one, test on it (when
+      ``leave_one_out`` and ≥ 2 files).
+    * ``test`` — train on all ``sources``, test on the ``test`` files (per file
+      and pooled).
+
+    ``importance`` adds impurity importance (a random forest on the training
+    sample) and permutation importance (held-out block fold 0); ``eliminate``
+    runs :func:`~lidarfx.classify.backward_elimination` over the spatial-block
+    folds (random folds when blocks are off).
+
+    Features of every labelled point are computed once; each fold then trains
+    on a class-balanced sample of its training part (``max_per_class``) exactly
+    like :func:`train`, and predicts every labelled point of the held-out part.
+    """
+    say = log or (lambda msg: None)
+    cfg = config or TrainConfig(**params)
+    if config is not None and params:
+        raise LidarfxError("give either config= or keyword parameters, not both")
+    t_all = time.perf_counter()
+    srcs = read_sources(sources, progress=progress)
+    cmap = resolve_classes(srcs, classes, ignore)
+    k = len(cmap)
+    report: dict[str, Any] = {
+        "lidarfx_version": __version__,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "layout": LAYOUT,
+        "config": cfg.to_dict(),
+        "features": cfg.feature_names(),
+        "classes": cmap.to_dict(),
+        "class_spec": cmap.spec(),
+        "train_files": [{"name": s.name, "points": s.n_total, "usable": len(s.cloud)} for s in srcs],
+        "sections": {},
+        "seconds": {},
+    }
+    need_cv = bool(cv) and (random_cv or block_size) or (leave_one_out and len(srcs) > 1)
+    if (importance or eliminate) and not need_cv:
+        raise LidarfxError("feature importance and backward elimination need cross-validation (cv >= 2)")
+    if need_cv:
+        t0 = time.perf_counter()
+        X, y, xy, g = _file_features(srcs, cmap, cfg, progress)
+        X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
+        report["seconds"]["cv_features"] = round(time.perf_counter() - t0, 3)
+        say(f"features of {len(y):,} labelled points: {X.shape[1]} columns, {time.perf_counter() - t0:.1f} s")
+        runs = []
+        if cv and random_cv:
+            runs.append(("cv_random", f"{cv}-fold CV, random folds (stratified by class)",
+                         random_folds(len(y), int(cv), cv_seed, y), {}))
+        if cv and block_size:
+            fb, blocks = block_folds(xy, int(cv), float(block_size), cv_seed, g)
+            runs.append(("cv_blocks", f"{cv}-fold CV, spatial blocks of {float(block_size):g} m",
+                         fb, {"block_size": float(block_size), "blocks": int(blocks.max() + 1)}))
+        if leave_one_out and len(srcs) > 1:
+            runs.append(("leave_one_file_out", "leave one file out (train on the others)", g,
+                         {"files": [s.name for s in srcs]}))
+        fitted_blocks = None
+        for key, title, folds, extra in runs:
+            t0 = time.perf_counter()
+            say(f"{title}:")
+            cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug)
+            if key == "leave_one_file_out":
+                for pf in per_fold:
+                    pf["file"] = srcs[pf["fold"]].name
+            report["sections"][key] = {"title": title, **extra, "folds": per_fold,
+                                       "metrics": _metrics_for(cm, cmap),
+                                       "seconds": round(time.perf_counter() - t0, 3)}
+            if key == "cv_blocks":
+                fitted_blocks = fitted
+        if importance:
+            from .importance import impurity_importance, permutation_importance
+
+            names = cfg.feature_names()
+            t0 = time.perf_counter()
+            imp: dict[str, Any] = {}
+            s = balanced_sample(y, cfg.max_per_class, cfg.seed)
+            rf_cfg = TrainConfig(**{**cfg.to_dict(), "classifier": "rf"})
+            imp["impurity"] = impurity_importance(rf_cfg.fit_matrix(X[s], y[s]), names)
+            imp["impurity_model"] = "random forest (100 trees) on the training sample"
+            if fitted_blocks:
+                est, te = fitted_blocks[0]
+                imp["permutation"] = permutation_importance(est, X[te], y[te], names, seed=cfg.seed)
+                imp["permutation_data"] = "held-out points of spatial-block fold 0 (at most 20 000)"
+            report["importance"] = imp
+            report["seconds"]["importance"] = round(time.perf_counter() - t0, 3)
+        if eliminate:
+            from .importance import backward_elimination
+
+            t0 = time.perf_counter()
+            folds = next((r[2] for r in runs if r[0] == "cv_blocks"), runs[0][2])
+            say("backward elimination (random forest, 50 trees):")
+            report["backward_elimination"] = backward_elimination(
+                X, y, cfg.feature_names(), folds, max_per_class=cfg.max_per_class, seed=cfg.seed, log=say)
+            report["seconds"]["backward_elimination"] = round(time.perf_counter() - t0, 3)
+    if test is not None:
+        t0 = time.perf_counter()
+        say("train on all training files:")
+        model = train(srcs, classes=cmap, config=cfg, progress=progress, log=lambda m: say("  " + m))
+        say("test:")
+        sec = evaluate_model(model, test, progress=progress, log=say)
+        sec["title"] = "train on the training files, test on the test files"
+        sec["train_seconds"] = model.meta["training"]["seconds"]
+        sec["seconds"] = round(time.perf_counter() - t0, 3)
+        report["sections"]["test"] = sec
+    report["seconds"]["total"] = round(time.perf_counter() - t_all, 3)
+    return report
+
+
+# --------------------------------------------------------------------------- text
+def _f(v: float, nd: int = 4) -> str:
+    return "   nan" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.{nd}f}"
+
+
+def format_metrics(m: dict[str, Any], title: str | None = None) -> str:
+    """Text table of one metrics dict (per-class rows, then the confusion matrix)."""
+    lines = []
+    if title:
+        lines.append(title)
+    lines.append(f"points {m['points']:,}   OA {_f(m['oa'])}   kappa {_f(m['kappa'])}   "
+                 f"mean F1 {_f(m['mean_f1'])}   mean IoU {_f(m['mean_iou'])}")
+    w = max([len(c["name"]) for c in m["classes"]] + [5])
+    lines.append(f"  {'class':<{w}} {'codes':>8} {'support':>9} {'PA':>7} {'UA':>7} {'F1':>7} {'IoU':>7}")
+    for c in m["classes"]:
+        lines.append(f"  {c['name']:<{w}} {str(c['code']):>8} {c['support']:>9,} {_f(c['pa']):>7} "
+                     f"{_f(c['ua']):>7} {_f(c['f1']):>7} {_f(c['iou']):>7}")
+    lines.append(f"  confusion matrix ({LAYOUT}):")
+    cw = max(9, max(len(f"{v:,}") for row in m["confusion"] for v in row) + 1)
+    lines.append("  " + " " * w + "".join(f"{c['name'][:cw - 1]:>{cw}}" for c in m["classes"]))
+    for c, row in zip(m["classes"], m["confusion"]):
+        lines.append(f"  {c['name']:<{w}}" + "".join(f"{v:>{cw},}" for v in row))
+    return "\n".join(lines)
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """The whole report as text: one block per section, then importances."""
+    out = [f"lidarfx {report.get('lidarfx_version', '')} classification report",
+           f"classes: {report.get('class_spec', '')}",
+           f"classifier: {report['config']['classifier']}, {len(report['features'])} features, "
+           f"radii {', '.join(f'{r:g}' for r in report['config']['radii'])} m, "
+           f"max {report['config']['max_per_class']} training points per class",
+           f"training files: {', '.join(Path(f['name']).name for f in report['train_files'])}", ""]
+    for key, sec in report["sections"].items():
+        out.append(f"== {sec['title']} [{key}] ==")
+        if "block_size" in sec:
+            out.append(f"{sec['blocks']} blocks of {sec['block_size']:g} m")
+        for pf in sec.get("folds", []):
+            label = Path(pf["file"]).name if "file" in pf else f"fold {pf['fold']}"
+            out.append(f"  {label}: test {pf['test_points']:,} points, OA {_f(pf['oa'])}, "
+                       f"mean F1 {_f(pf['mean_f1'])}")
+        if key == "test":
+            for name, m in sec["files"].items():
+                out.append(format_metrics(m, f"-- {Path(name).name}"))
+            out.append(format_metrics(sec["metrics"], "-- all test files pooled"))
+        else:
+            out.append(format_metrics(sec["metrics"]))
+        out.append("")
+    imp = report.get("importance")
+    if imp:
+        out.append(f"== feature importance (top 15) ==")
+        out.append(f"impurity ({imp.get('impurity_model')}):")
+        for r in imp["impurity"][:15]:
+            out.append(f"  {r['name']:<32} {r['importance']:.4f}")
+        if "permutation" in imp:
+            out.append(f"permutation, drop of mean F1 ({imp.get('permutation_data')}):")
+            for r in imp["permutation"][:15]:
+                out.append(f"  {r['name']:<32} {r['mean']:.4f} ± {r['std']:.4f}")
+        out.append("")
+    be = report.get("backward_elimination")
+    if be:
+        out.append("== backward elimination (Chehata 2009; random forest) ==")
+        for st in be["steps"]:
+            out.append(f"  {st['n_features']:3d} features: OA {_f(st['oa'])}, mean F1 {_f(st['mean_f1'])}")
+        b = be["best"]
+        out.append(f"smallest set within {be['tolerance']} of the best mean F1: {b['n_features']} features: "
+                   + ", ".join(b["features"]))
+        out.append("")
+    if report.get("seconds"):
+        out.append("seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()))
+    return "\n".join(out)
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _nan_to_none(o: Any) -> Any:
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {k: _nan_to_none(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_nan_to_none(v) for v in o]
+    return o
+
+
+def report_json(report: dict[str, Any]) -> str:
+    return json.dumps(_nan_to_none(report), indent=2, default=_json_default, allow_nan=False)
+
+
+def write_report(report: dict[str, Any], out_dir: str | os.PathLike) -> list[Path]:
+    """``report.txt``, ``report.json`` and ``confusion_<section>.png`` (pooled, and one
+    per test file) in ``out_dir`` (created if missing; each file written atomically)."""
+    from .._atomic import atomic_path
+
+    d = Path(out_dir)
+    if d.exists() and not d.is_dir():
+        raise LidarfxError(f"{d} exists and is not a folder")
+    d.mkdir(parents=True, exist_ok=True)
+    written = []
+    with atomic_path(d / "report.txt") as tmp:
+        tmp.write_text(format_report(report) + "\n")
+    written.append(d / "report.txt")
+    with atomic_path(d / "report.json") as tmp:
+        tmp.write_text(report_json(report) + "\n")
+    written.append(d / "report.json")
+    for key, sec in report["sections"].items():
+        written.append(plot_confusion(sec["metrics"], d / f"confusion_{key}.png", title=sec["title"]))
+        if key == "test" and len(sec["files"]) > 1:
+            for name, m in sec["files"].items():
+                stem = Path(name).stem.replace(" ", "_")
+                written.append(plot_confusion(m, d / f"confusion_test_{stem}.png", title=f"test: {Path(name).name}"))
+    return written
+
+
+def plot_confusion(m: dict[str, Any], path: str | os.PathLike, title: str | None = None) -> Path:
+    """Confusion-matrix PNG: cells coloured by row share (= PA on the diagonal), with counts;
+    the layout (rows = reference, columns = predicted) is written on the figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .._atomic import atomic_path
+
+    cm = np.asarray(m["confusion"], dtype=np.int64)
+    names = [c["name"] for c in m["classes"]]
+    k = len(names)
+    rows = cm.sum(axis=1, keepdims=True)
+    share = np.divide(cm, rows, out=np.zeros_like(cm, dtype=float), where=rows > 0)
+    size = 2.2 + 1.1 * k
+    fig, ax = plt.subplots(figsize=(size + 1.2, size + 0.6))
+    ax.imshow(share, cmap="Blues", vmin=0, vmax=1)
+    for i in range(k):
+        for j in range(k):
+            ax.text(j, i, f"{cm[i, j]:,}\n{100 * share[i, j]:.1f}%", ha="center", va="center", fontsize=8,
+                    color="white" if share[i, j] > 0.55 else "black")
+    ax.set_xticks(range(k), [f"{n}\nUA {_f(c['ua'], 3)}" for n, c in zip(names, m["classes"])], fontsize=8)
+    ax.set_yticks(range(k), [f"{n}\nPA {_f(c['pa'], 3)}" for n, c in zip(names, m["classes"])], fontsize=8)
+    ax.set_xlabel("predicted (columns)")
+    ax.set_ylabel("reference (rows)")
+    head = (title + "\n") if title else ""
+    ax.set_title(f"{head}OA {_f(m['oa'])}  kappa {_f(m['kappa'])}  mean F1 {_f(m['mean_f1'])}", fontsize=9)
+    fig.text(0.5, 0.01, f"layout: {LAYOUT}; cell = points and share of the reference row",
+             ha="center", fontsize=7)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    p = Path(path)
+    with atomic_path(p) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return p

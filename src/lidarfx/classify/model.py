@@ -1,0 +1,577 @@
+"""Training, prediction and the model file.
+
+A model is a fitted scikit-learn pipeline (:class:`~lidarfx.classify.pipeline.LidarFeatures`
+→ NaN handling → classifier) plus what is needed to use it safely: the class map,
+the expanded feature list, the radii and feature parameters, the lidarfx and
+scikit-learn versions and the training files.  It is saved with **skops**
+(no pickle) and loaded with an explicit list of trusted types: a file holding
+any other type is refused before anything in it is built.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from .. import __version__
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+from .classes import DEFAULT_IGNORE, ClassMap
+from .pipeline import (
+    DEFAULT_HAG_CAP,
+    DEFAULT_MAX_DISC_POINTS,
+    DEFAULT_RADII,
+    CloudSample,
+    LidarFeatures,
+    balanced_sample,
+    feature_list,
+    make_classifier,
+    make_imputer,
+    terrain_shear,
+    usable_mask,
+)
+
+__all__ = ["TrainConfig", "ClassifierModel", "train", "load_model", "read_sources", "Source",
+           "FORMAT", "FORMAT_VERSION", "TRUSTED_TYPES"]
+
+FORMAT = "lidarfx-classifier"
+FORMAT_VERSION = 1
+
+#: Every type a lidarfx model file may contain.  Before anything is built, the
+#: file's schema is read and each type in it must be on this list (skops' own
+#: default trust — all scikit-learn estimators — is not relied upon); the
+#: estimators found are then checked to be exactly the ones lidarfx writes.
+TRUSTED_TYPES: tuple[str, ...] = (
+    # containers and scalars
+    "builtins.dict", "builtins.list", "builtins.tuple", "builtins.str", "builtins.int", "builtins.float",
+    "builtins.bool", "builtins.NoneType",
+    "numpy.ndarray", "numpy.dtype", "numpy.float64", "numpy.float32", "numpy.int64", "numpy.int32",
+    "numpy.uint64", "numpy.uint8", "numpy.bool_", "numpy.random._generator.Generator",
+    # gradient boosting
+    "sklearn.ensemble._hist_gradient_boosting.gradient_boosting.HistGradientBoostingClassifier",
+    "sklearn.ensemble._hist_gradient_boosting.predictor.TreePredictor",
+    "sklearn.ensemble._hist_gradient_boosting.binning._BinMapper",
+    "sklearn._loss.loss.HalfMultinomialLoss", "sklearn._loss.loss.HalfBinomialLoss",
+    "sklearn._loss._loss.CyHalfMultinomialLoss", "sklearn._loss._loss.CyHalfBinomialLoss",
+    "sklearn._loss.link.MultinomialLogit", "sklearn._loss.link.LogitLink", "sklearn._loss.link.Interval",
+    "sklearn.preprocessing._label.LabelEncoder",
+    # random forest
+    "sklearn.ensemble._forest.RandomForestClassifier", "sklearn.tree._classes.DecisionTreeClassifier",
+    "sklearn.tree._tree.Tree",
+    # naive Bayes and its imputer
+    "sklearn.naive_bayes.GaussianNB", "sklearn.impute._base.SimpleImputer",
+)
+
+DEFAULT_MAX_PER_CLASS = 20_000
+
+
+# --------------------------------------------------------------------------- configuration
+@dataclass
+class TrainConfig:
+    """Everything that defines a model before it sees data (stored in the model file)."""
+
+    features: list[str] | None = None
+    radii: list[float] = field(default_factory=lambda: list(DEFAULT_RADII))
+    neighbourhood: str = "sphere"
+    k: int | None = None
+    scanner: list[float] | None = None
+    hist_bins: int = 10
+    ground: str = "smrf"
+    hag_cap: float | None = DEFAULT_HAG_CAP
+    max_disc_points: float | None = DEFAULT_MAX_DISC_POINTS
+    terrain_augment: int = 1
+    precomputed: bool = False
+    classifier: str = "hgb"
+    n_estimators: int | None = None
+    max_per_class: int | None = DEFAULT_MAX_PER_CLASS
+    balance: bool = True
+    seed: int = 0
+    n_jobs: int | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.features, str):
+            self.features = [f.strip() for f in self.features.split(",") if f.strip()]
+        elif self.features is not None:
+            self.features = [str(f) for f in self.features]
+        self.radii = sorted(set(float(r) for r in (self.radii or [])))
+        if self.scanner is not None:
+            self.scanner = [float(v) for v in self.scanner]
+            if len(self.scanner) != 3:
+                raise LidarfxError("scanner must be x,y,z")
+        if self.hag_cap is not None:
+            self.hag_cap = float(self.hag_cap)
+            if not self.hag_cap > 0:
+                raise LidarfxError(f"hag_cap must be a positive height in m or None, got {self.hag_cap}")
+        if self.max_disc_points is not None:
+            self.max_disc_points = float(self.max_disc_points)
+        self.terrain_augment = int(self.terrain_augment or 0)
+        if self.terrain_augment < 0:
+            raise LidarfxError("terrain_augment must be >= 0")
+        if self.max_per_class is not None and int(self.max_per_class) < 1:
+            raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
+        make_classifier(self.classifier)  # validates the kind
+        self.classifier = str(self.classifier).lower()
+        feature_list(self.features, self.radii, self.neighbourhood, self.k)  # validates
+
+    def feature_params(self) -> dict[str, Any]:
+        return {"features": self.features, "radii": list(self.radii), "neighbourhood": self.neighbourhood,
+                "k": self.k, "scanner": self.scanner, "hist_bins": self.hist_bins, "ground": self.ground,
+                "hag_cap": self.hag_cap, "max_disc_points": self.max_disc_points,
+                "precomputed": self.precomputed}
+
+    def transformer(self, progress: bool | None = False) -> LidarFeatures:
+        return LidarFeatures(**self.feature_params(), progress=progress).fit()
+
+    def feature_names(self) -> list[str]:
+        return feature_list(self.features, self.radii, self.neighbourhood, self.k)[0]
+
+    def fit_matrix(self, X: np.ndarray, y: np.ndarray):
+        """Fit NaN handling + classifier on a feature matrix (class-balanced by sample weights)."""
+        from sklearn.pipeline import Pipeline
+        from sklearn.utils.class_weight import compute_sample_weight
+
+        if len(np.unique(y)) < 2:
+            raise LidarfxError("the training sample holds fewer than two classes")
+        tail = Pipeline([("impute", make_imputer(self.classifier)),
+                         ("classifier", make_classifier(self.classifier, n_estimators=self.n_estimators,
+                                                        random_state=self.seed, n_jobs=self.n_jobs))])
+        w = compute_sample_weight("balanced", y) if self.balance else None
+        if w is not None and np.allclose(w, w[0]):
+            w = None  # a balanced sample needs no weights (and weights double the boosting time)
+        with _fit_threads(self):
+            tail.fit(X, y, classifier__sample_weight=w)
+        return tail
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _fit_threads(cfg: "TrainConfig"):
+    """OpenMP threads while fitting gradient boosting: ``n_jobs`` (default 1).
+
+    scikit-learn's histogram boosting synchronises its OpenMP threads many times
+    per tree; when the cores are shared with other processes the spinning threads
+    make a fit 5–20 times slower than on one thread (measured here: 100 s vs 5 s).
+    One thread is the robust default; pass ``n_jobs`` to use more on an idle machine.
+    """
+    import contextlib
+
+    if cfg.classifier != "hgb":
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=int(cfg.n_jobs or 1), user_api="openmp")
+
+
+# --------------------------------------------------------------------------- sources
+@dataclass
+class Source:
+    """One input cloud, reduced to its usable points (see :func:`usable_mask`)."""
+
+    name: str
+    cloud: PointCloud  # usable points only
+    usable: np.ndarray  # mask into the original cloud
+    n_total: int
+
+
+def read_sources(sources: Any, progress: bool | None = False) -> list[Source]:
+    """Paths or PointClouds → :class:`Source` list (virtual / withheld points dropped)."""
+    from .. import io
+
+    if isinstance(sources, (str, os.PathLike, PointCloud, Source)):
+        sources = [sources]
+    out = []
+    for i, s in enumerate(sources):
+        if isinstance(s, Source):
+            out.append(s)
+            continue
+        if isinstance(s, PointCloud):
+            cloud, name = s, str(s.meta.get("source") or s.meta.get("name") or f"cloud {i + 1}")
+        else:
+            cloud, name = io.read(s, progress=progress), str(s)
+        mask = usable_mask(cloud)
+        sub = cloud if mask.all() else cloud.subset(mask)
+        sub.meta = {**sub.meta, "name": name}
+        out.append(Source(name, sub, mask, len(cloud)))
+    if not out:
+        raise LidarfxError("no input clouds")
+    return out
+
+
+def _labels(src: Source, classes: ClassMap) -> np.ndarray:
+    if "classification" not in src.cloud:
+        raise LidarfxError(f"{src.name} has no classification: training and evaluation need labelled points")
+    return classes.index_of(src.cloud["classification"])
+
+
+def resolve_classes(sources: list[Source], classes: Any = None, ignore: Iterable[int] | None = None) -> ClassMap:
+    """The class map: parsed from ``classes`` or one class per code found, minus ``ignore``."""
+    if classes is not None:
+        cm = ClassMap.parse(classes)
+        if ignore:
+            cm = cm.without(ignore)
+        return cm
+    codes: set[int] = set()
+    for s in sources:
+        if "classification" not in s.cloud:
+            raise LidarfxError(f"{s.name} has no classification: training needs labelled points")
+        codes |= set(np.unique(s.cloud["classification"]).tolist())
+    return ClassMap.from_codes(codes, DEFAULT_IGNORE if ignore is None else ignore)
+
+
+# --------------------------------------------------------------------------- model
+class ClassifierModel:
+    """A fitted point classifier: ``pipeline`` (scikit-learn), ``classes`` and ``meta``."""
+
+    def __init__(self, pipeline, classes: ClassMap, meta: dict[str, Any]) -> None:
+        self.pipeline = pipeline
+        self.classes = classes
+        self.meta = meta
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def features(self) -> LidarFeatures:
+        return self.pipeline.named_steps["features"]
+
+    @property
+    def feature_names(self) -> list[str]:
+        return list(self.meta["features"])
+
+    @property
+    def radii(self) -> list[float]:
+        return list(self.meta["config"]["radii"])
+
+    @property
+    def estimator(self):
+        """The fitted part after the features (NaN handling + classifier), for scikit-learn tools."""
+        return self.pipeline[1:]
+
+    def __repr__(self) -> str:
+        return (f"ClassifierModel({self.meta['config']['classifier']}, classes={self.classes.spec()!r}, "
+                f"{len(self.feature_names)} features, radii={self.radii})")
+
+    # ------------------------------------------------------------------ prediction
+    def check(self, cloud: PointCloud, name: str | None = None) -> None:
+        """Refuse a cloud the model cannot classify (missing fields or precomputed features)."""
+        self.features.check_cloud(cloud, name or str(cloud.meta.get("source") or "the cloud"))
+
+    def feature_matrix(self, cloud: PointCloud, index: np.ndarray | None = None, chunk: int = 1_000_000,
+                       progress: bool | None = False) -> np.ndarray:
+        """Features of ``cloud`` (rows ``index``, default all) as the model computes them."""
+        tr = self.features
+        tr.progress = progress
+        names, slots, point, rs = tr._plan()
+        self.check(cloud)
+        idx = np.arange(len(cloud)) if index is None else np.asarray(index)
+        cache: dict = {}
+        blocks = [tr._matrix(CloudSample(cloud, idx[a:a + chunk]), names, slots, point, rs, cache)
+                  for a in range(0, len(idx), chunk)] or [np.empty((0, len(names)), np.float32)]
+        return np.vstack(blocks) if len(blocks) > 1 else blocks[0]
+
+    def predict_proba(self, cloud: PointCloud, *, progress: bool | None = False) -> tuple[np.ndarray, np.ndarray]:
+        """``(proba, usable)``: class probabilities (n_usable × k) of the usable points and the mask."""
+        usable = usable_mask(cloud)
+        sub = cloud if usable.all() else cloud.subset(usable)
+        X = self.feature_matrix(sub, progress=progress)
+        return self.estimator.predict_proba(X), usable
+
+    def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False):
+        """Output class code of every point (int16); −1 where not predicted (virtual /
+        withheld / synthetic points).  With ``return_confidence`` also the highest
+        class probability (float32, NaN where not predicted)."""
+        usable = usable_mask(cloud)
+        sub = cloud if usable.all() else cloud.subset(usable)
+        X = self.feature_matrix(sub, progress=progress)
+        codes = np.full(len(cloud), -1, dtype=np.int16)
+        if return_confidence:
+            proba = self.estimator.predict_proba(X)
+            k = proba.argmax(axis=1)
+            conf = np.full(len(cloud), np.nan, dtype=np.float32)
+            conf[usable] = proba[np.arange(len(k)), k]
+        else:
+            k = self.estimator.predict(X)
+        codes[usable] = self.classes.code_of(k)
+        return (codes, conf) if return_confidence else codes
+
+    def classify(self, cloud: PointCloud, *, confidence: bool = False, progress: bool | None = False) -> PointCloud:
+        """A copy of ``cloud`` with ``classification`` set to the predicted codes (points
+        not predicted keep their class, or get 1 = unclassified); optionally a
+        float32 ``confidence`` attribute (highest class probability)."""
+        res = self.predict(cloud, progress=progress, return_confidence=confidence)
+        codes, conf = res if confidence else (res, None)
+        out = cloud.copy() if hasattr(cloud, "copy") else PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
+        old = out.get("classification")
+        cls = np.where(codes >= 0, codes, np.asarray(old) if old is not None else 1).astype(np.uint8)
+        out["classification"] = cls
+        if conf is not None:
+            out["confidence"] = conf
+        out.meta = {**out.meta, "classify": {"model_classes": self.classes.spec(),
+                                             "predicted_points": int((codes >= 0).sum())}}
+        return out
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the model with skops (atomic)."""
+        import skops.io as sio
+
+        from .._atomic import atomic_path
+
+        tail = self.estimator
+        obj = {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "lidarfx_version": __version__,
+            "sklearn_version": _sklearn_version(),
+            "meta": _plain(self.meta),
+            "impute": tail.named_steps["impute"],
+            "classifier": tail.named_steps["classifier"],
+        }
+        p = Path(path)
+        with atomic_path(p) as tmp:
+            sio.dump(obj, tmp)
+        return p
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "ClassifierModel":
+        return load_model(path)
+
+
+def _sklearn_version() -> str:
+    import sklearn
+
+    return sklearn.__version__
+
+
+def _plain(obj: Any) -> Any:
+    """JSON-like copy (dict/list/str/int/float/bool/None) for the model file."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if obj is None or isinstance(obj, (str, int, float, bool)):
+        return obj
+    return str(obj)
+
+
+def file_types(path: str | os.PathLike) -> set[str]:
+    """Every ``module.class`` named in a skops file's schema (read without building anything)."""
+    import json
+    import zipfile
+
+    def walk(o: Any, acc: set[str]) -> None:
+        if isinstance(o, dict):
+            if "__class__" in o and "__module__" in o:
+                acc.add(f"{o['__module__']}.{o['__class__']}")
+            for v in o.values():
+                walk(v, acc)
+        elif isinstance(o, list):
+            for v in o:
+                walk(v, acc)
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            schema = json.loads(z.read("schema.json"))
+    except Exception as exc:
+        raise LidarfxError(f"{path}: not a skops model file ({type(exc).__name__}: {exc})") from None
+    acc: set[str] = set()
+    walk(schema, acc)
+    return acc
+
+
+def untrusted_types(path: str | os.PathLike) -> list[str]:
+    """Types in a skops file that are not in :data:`TRUSTED_TYPES` (empty = safe to load)."""
+    return sorted(t for t in file_types(path) if t not in TRUSTED_TYPES)
+
+
+def load_model(path: str | os.PathLike) -> ClassifierModel:
+    """Load a model saved by :meth:`ClassifierModel.save` without executing code.
+
+    The types named in the file are listed first; if any is not in
+    :data:`TRUSTED_TYPES` the file is refused (:class:`LidarfxError`) and
+    nothing in it is built.  Then skops loads it with exactly those types
+    trusted, and the estimators are checked to be the kinds lidarfx writes.
+    """
+    import skops.io as sio
+    from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
+    from sklearn.impute import SimpleImputer
+    from sklearn.naive_bayes import GaussianNB
+    from sklearn.pipeline import Pipeline
+
+    p = Path(path)
+    if not p.is_file():
+        raise LidarfxError(f"model file not found: {p}")
+    bad = untrusted_types(p)
+    if bad:
+        raise LidarfxError(f"{p}: refusing to load: the file contains types a lidarfx model never holds: "
+                           f"{', '.join(bad[:5])}")
+    try:
+        trusted = [t for t in sio.get_untrusted_types(file=p) if t in TRUSTED_TYPES]
+        obj = sio.load(p, trusted=trusted)
+    except Exception as exc:
+        raise LidarfxError(f"{p}: cannot load the model ({type(exc).__name__}: {exc})") from None
+    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
+        raise LidarfxError(f"{p}: not a lidarfx classifier model")
+    if obj.get("format_version") != FORMAT_VERSION:
+        raise LidarfxError(f"{p}: model format {obj.get('format_version')} is not supported "
+                           f"(this lidarfx reads format {FORMAT_VERSION})")
+    clf, imp = obj.get("classifier"), obj.get("impute")
+    if type(clf) not in (HistGradientBoostingClassifier, RandomForestClassifier, GaussianNB):
+        raise LidarfxError(f"{p}: unexpected classifier type {type(clf).__name__}")
+    if not (imp == "passthrough" or type(imp) is SimpleImputer):
+        raise LidarfxError(f"{p}: unexpected preprocessing step {type(imp).__name__}")
+    meta = obj["meta"]
+    if obj.get("lidarfx_version") != __version__:
+        warnings.warn(f"{p} was written by lidarfx {obj.get('lidarfx_version')}, this is {__version__}; "
+                      "features may differ", stacklevel=2)
+    if obj.get("sklearn_version") != _sklearn_version():
+        warnings.warn(f"{p} was written with scikit-learn {obj.get('sklearn_version')}, this is "
+                      f"{_sklearn_version()}", stacklevel=2)
+    try:
+        config = TrainConfig(**meta["config"])
+        names = config.feature_names()
+        classes = ClassMap.from_dict(meta["classes"])
+    except (KeyError, TypeError) as exc:
+        raise LidarfxError(f"{p}: incomplete model metadata ({exc})") from None
+    if names != list(meta["features"]):
+        raise LidarfxError(f"{p}: the stored feature list does not match its feature parameters "
+                           "(file edited, or written by an incompatible lidarfx)")
+    n_in = getattr(clf, "n_features_in_", len(names))
+    if n_in != len(names):
+        raise LidarfxError(f"{p}: the classifier expects {n_in} features but the model lists {len(names)}")
+    if len(getattr(clf, "classes_", range(len(classes)))) != len(classes):
+        raise LidarfxError(f"{p}: the classifier knows {len(clf.classes_)} classes, the class map {len(classes)}")
+    pipe = Pipeline([("features", config.transformer()), ("impute", imp), ("classifier", clf)])
+    return ClassifierModel(pipe, classes, meta)
+
+
+# --------------------------------------------------------------------------- training
+AUGMENT_SHARE = 0.5
+"""Training points drawn per class from each terrain-sheared copy, relative to ``max_per_class``."""
+
+
+def _aug_cap(cfg: TrainConfig) -> int | None:
+    return None if cfg.max_per_class is None else max(1, int(cfg.max_per_class * AUGMENT_SHARE))
+
+
+def sheared_sources(srcs: list[Source], cfg: TrainConfig) -> list[list[Source]]:
+    """``cfg.terrain_augment`` lists of terrain-sheared copies of the sources (training augmentation,
+    see :func:`~lidarfx.classify.pipeline.terrain_shear`); seeded by ``cfg.seed``."""
+    out = []
+    for a in range(cfg.terrain_augment):
+        out.append([Source(s.name + f" (sheared {a + 1})", terrain_shear(s.cloud, seed=cfg.seed * 7919 + 31 * a + i),
+                           s.usable, s.n_total) for i, s in enumerate(srcs)])
+    return out
+
+
+def labelled_sample(sources: list[Source], classes: ClassMap, max_per_class: int | None, seed: int
+                    ) -> tuple[list[CloudSample], np.ndarray, dict[str, Any]]:
+    """Balanced training sample over all sources: (samples, y, per-class counts)."""
+    ys = [_labels(s, classes) for s in sources]
+    y_all = np.concatenate(ys) if ys else np.zeros(0, np.int16)
+    pick = balanced_sample(y_all, max_per_class, seed)
+    bounds = np.cumsum([0] + [len(y) for y in ys])
+    samples, yy = [], []
+    for i, s in enumerate(sources):
+        sel = pick[(pick >= bounds[i]) & (pick < bounds[i + 1])] - bounds[i]
+        if len(sel):
+            samples.append(CloudSample(s.cloud, sel))
+            yy.append(ys[i][sel])
+    y = np.concatenate(yy) if yy else np.zeros(0, np.int16)
+    counts = {
+        "available": {classes.names[c]: int((y_all == c).sum()) for c in range(len(classes))},
+        "used": {classes.names[c]: int((y == c).sum()) for c in range(len(classes))},
+    }
+    missing = [classes.names[c] for c in range(len(classes)) if not (y == c).any()]
+    if missing:
+        raise LidarfxError(f"no training points of class {', '.join(missing)} "
+                           f"(classes in the data: check --classes)")
+    return samples, y.astype(np.int64), counts
+
+
+def train(
+    sources: Any,
+    *,
+    classes: Any = None,
+    ignore: Iterable[int] | None = None,
+    config: TrainConfig | None = None,
+    progress: bool | None = False,
+    log: Callable[[str], None] | None = None,
+    **params: Any,
+) -> ClassifierModel:
+    """Train a point classifier on labelled clouds.
+
+    Parameters
+    ----------
+    sources:
+        Paths or :class:`~lidarfx.PointCloud` objects with a ``classification``.
+    classes:
+        Class map (``"2,3+4+5,6"``; see :class:`ClassMap`); default: one class
+        per code found, minus ``ignore`` (default 0, 1, 7, 18).
+    config, **params:
+        A :class:`TrainConfig`, or its fields as keywords: ``features``,
+        ``radii``, ``classifier`` (``hgb``/``rf``/``nb``), ``max_per_class``
+        (training points drawn per class, default 20 000), ``balance``
+        (class-balanced sample weights, default True), ``seed``, ...
+
+    Returns
+    -------
+    ClassifierModel
+    """
+    t0 = time.perf_counter()
+    cfg = config or TrainConfig(**params)
+    if config is not None and params:
+        raise LidarfxError("give either config= or keyword parameters, not both")
+    say = log or (lambda msg: None)
+    srcs = read_sources(sources, progress=progress)
+    cmap = resolve_classes(srcs, classes, ignore)
+    samples, y, counts = labelled_sample(srcs, cmap, cfg.max_per_class, cfg.seed)
+    say(f"training sample: {len(y):,} points from {len(srcs)} file(s): "
+        + ", ".join(f"{k} {v:,}" for k, v in counts["used"].items()))
+    tr = cfg.transformer(progress=progress)
+    t1 = time.perf_counter()
+    X = tr.transform(samples)
+    for a, copies in enumerate(sheared_sources(srcs, cfg)):
+        s2, y2, c2 = labelled_sample(copies, cmap, _aug_cap(cfg), cfg.seed + 1 + a)
+        X = np.vstack([X, tr.transform(s2)])
+        y = np.concatenate([y, y2])
+        for name, v in c2["used"].items():
+            counts["used"][name] += v
+        counts.setdefault("terrain_augment", []).append(c2["used"])
+    t2 = time.perf_counter()
+    say(f"features: {X.shape[1]} columns of {len(y):,} points in {t2 - t1:.1f} s"
+        + (f" (incl. {cfg.terrain_augment} terrain-sheared cop{'y' if cfg.terrain_augment == 1 else 'ies'})"
+           if cfg.terrain_augment else ""))
+    tail = cfg.fit_matrix(X, y)
+    t3 = time.perf_counter()
+    say(f"fit {cfg.classifier}: {t3 - t2:.1f} s")
+    from sklearn.pipeline import Pipeline
+
+    pipe = Pipeline([("features", tr), ("impute", tail.named_steps["impute"]),
+                     ("classifier", tail.named_steps["classifier"])])
+    meta = {
+        "config": cfg.to_dict(),
+        "features": cfg.feature_names(),
+        "classes": cmap.to_dict(),
+        "class_spec": cmap.spec(),
+        "training": {
+            "files": [{"name": s.name, "points": s.n_total, "usable": len(s.cloud)} for s in srcs],
+            "counts": counts,
+            "seconds": {"read": round(t1 - t0, 3), "features": round(t2 - t1, 3), "fit": round(t3 - t2, 3)},
+        },
+        "lidarfx_version": __version__,
+        "sklearn_version": _sklearn_version(),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    return ClassifierModel(pipe, cmap, meta)

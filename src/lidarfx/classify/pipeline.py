@@ -1,0 +1,580 @@
+"""The scikit-learn side of the classifier: a feature transformer and the estimators.
+
+``LidarFeatures`` turns point clouds into a feature matrix; it is a regular
+scikit-learn transformer, so ``Pipeline([("features", LidarFeatures()),
+("classifier", HistGradientBoostingClassifier())])`` works, and every
+scikit-learn tool (``cross_val_score``, ``permutation_importance``, grid
+search, ...) works on the matrix it returns.
+
+What ``transform`` accepts (``X``):
+
+* a :class:`~lidarfx.PointCloud` — one row per point;
+* a :class:`CloudSample` ``(cloud, index)`` — rows for the points in ``index``
+  only, with every point of ``cloud`` still serving as a neighbour (cheap
+  sparse training samples);
+* a list of the above — the rows stacked in order;
+* a 2-D array with one column per feature — returned unchanged (a matrix
+  computed earlier).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+
+from ..cloud import PointCloud
+from ..errors import LidarfxError
+
+__all__ = [
+    "CloudSample",
+    "LidarFeatures",
+    "DEFAULT_FEATURES",
+    "DEFAULT_RADII",
+    "EXTRA_INPUTS",
+    "CLASSIFIERS",
+    "make_classifier",
+    "make_pipeline",
+    "usable_mask",
+    "balanced_sample",
+    "feature_list",
+]
+
+#: radii of the default multi-scale run (m), chosen for ALS at 10–100 pts/m² (docs/classification.md)
+DEFAULT_RADII: tuple[float, ...] = (1.0, 2.0, 3.0)
+
+#: the default feature list (per radius for neighbourhood features), chosen by spatial-block
+#: and leave-one-tile-out cross-validation on the IGN training tiles (docs/classification.md).
+#: Orientation (normal_x/y, aspect) and absolute densities (density_2d/3d, n_neighbours) are
+#: left out on purpose: they do not transfer between scenes, surveys and point densities.  The
+#: Chehata height group (dz_below, dz_above, z_range, z_std) is left out and height above
+#: ground is capped (``hag_cap``): absolute heights let a model learn "taller than anything
+#: in training = building" (trees of a tile with tall trees became buildings: leave-one-tile-out
+#: OA 0.85 with them, 0.94 without).  Slope-dependent ratios are left out (see below).
+DEFAULT_FEATURES: tuple[str, ...] = (
+    # eigen (Chehata 2009)
+    "eigenvalue1", "eigenvalue2", "eigenvalue3", "eigenvalue_sum", "linearity", "planarity",
+    "sphericity", "anisotropy", "omnivariance", "eigenentropy", "surface_variation", "verticality",
+    # local plane (slope is left out: a monotone function of verticality, trees never need both)
+    "plane_distance", "plane_std", "plane_inlier_ratio",
+    # slope-adaptive echo ratio (Höfle 2009): 100 % on any plane up to 80°, so sloped ground does
+    # not look like vegetation; the plain echo_ratio / neighbour_ratio / density_ratio fall
+    # like cos(slope) and are left out
+    "echo_ratio_slope",
+    # Lang's height-difference histogram (dh_std = z_std is left out)
+    "dh_peaks", "dh_peak_distance", "dh_share_above", "dh_share_below", "dh_entropy",
+    "dh_skewness", "dh_max_bin",
+    # spatial distribution
+    "centroid_offset", "octant_occupancy", "z_asymmetry",
+    # per point
+    "return_ratio", "number_of_returns", "height_above_ground",
+)
+
+#: cap of height_above_ground (m), see LidarFeatures
+DEFAULT_HAG_CAP = 5.0
+
+#: neighbour clouds are thinned at random so that a disc of the smallest radius holds at most this
+#: many points on average (125 ≈ 40 points/m² at r = 1 m; TLS radii of 0.1 m allow 4 000 points/m²)
+DEFAULT_MAX_DISC_POINTS = 125.0
+
+#: per-point inputs that are not neighbourhood features (no radius suffix)
+EXTRA_INPUTS: dict[str, str] = {
+    "height_above_ground": "z minus the ground surface (TIN) under the point, capped at hag_cap (default 5 m); "
+    "ground from the SMRF filter (label-free) or, with ground='class', from the cloud's class 2",
+    "number_of_returns": "number of returns of the pulse (LAS field)",
+    "return_number": "return number (LAS field)",
+    "intensity": "raw intensity (LAS field)",
+    "intensity_norm": "intensity divided by the cloud's median intensity",
+    "z": "z minus the cloud's lowest z",
+}
+
+#: LAS fields each extra input needs
+_NEEDS = {
+    "number_of_returns": ("number_of_returns",),
+    "return_number": ("return_number",),
+    "return_ratio": ("return_number", "number_of_returns"),
+    "intensity": ("intensity",),
+    "intensity_norm": ("intensity",),
+}
+
+CLASSIFIERS: dict[str, str] = {
+    "hgb": "HistGradientBoostingClassifier (gradient-boosted trees; handles NaN)",
+    "rf": "RandomForestClassifier (Breiman; handles NaN)",
+    "nb": "GaussianNB (Gaussian naive Bayes; NaN replaced by the training median)",
+}
+
+
+def scale_suffix(radius: float) -> str:
+    return f"_r{radius:.2f}"
+
+
+# --------------------------------------------------------------------------- inputs
+@dataclass
+class CloudSample:
+    """Points ``index`` of ``cloud`` (all points when ``index`` is None); every
+    point of ``cloud`` serves as a neighbour."""
+
+    cloud: PointCloud
+    index: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cloud, PointCloud):
+            raise LidarfxError("CloudSample needs a PointCloud")
+        if self.index is not None:
+            idx = np.asarray(self.index)
+            if idx.dtype == bool:
+                if idx.shape != (len(self.cloud),):
+                    raise LidarfxError(f"sample mask must have length {len(self.cloud)}")
+                idx = np.flatnonzero(idx)
+            idx = idx.astype(np.int64, copy=False).ravel()
+            if idx.size and (idx.min() < 0 or idx.max() >= len(self.cloud)):
+                raise LidarfxError("sample indices out of range")
+            self.index = idx
+
+    def __len__(self) -> int:
+        return len(self.cloud) if self.index is None else int(len(self.index))
+
+    @property
+    def name(self) -> str:
+        return str(self.cloud.meta.get("source") or self.cloud.meta.get("name") or "the cloud")
+
+
+def usable_mask(cloud: PointCloud) -> np.ndarray:
+    """Points that are real measurements: not withheld, not synthetic, and — when
+    the cloud carries return numbers — ``return_number > 0``.
+
+    IGN LiDAR HD *virtual* points (class 66) have return number 0; they are
+    excluded from neighbourhoods and from prediction without looking at the
+    (reference) classification.
+    """
+    ok = np.all(np.isfinite(cloud.xyz), axis=1)
+    for flag in ("withheld", "synthetic"):
+        if flag in cloud:
+            ok &= np.asarray(cloud[flag]) == 0
+    if "return_number" in cloud:
+        rn = np.asarray(cloud["return_number"])
+        if (rn > 0).any():
+            ok &= rn > 0
+    return ok
+
+
+def _has_field(cloud: PointCloud, name: str) -> bool:
+    if name not in cloud:
+        return False
+    v = np.asarray(cloud[name])
+    return bool(v.size) and bool(np.any(v != 0))
+
+
+def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | None,
+                 neighbourhood: str = "sphere", k: int | None = None) -> tuple[list[str], tuple, list[str], list[float]]:
+    """Expand groups / names into ``(names_out, slots, point_names, radii)``.
+
+    Neighbourhood features get a scale suffix for every radius, always (also
+    for a single radius), so a model can tell ``planarity_r1.00`` from
+    ``planarity_r0.50``.
+    """
+    from ..features import slots as S
+    from ..features.registry import resolve
+
+    tokens = DEFAULT_FEATURES if features is None else features
+    if isinstance(tokens, str):
+        tokens = tokens.split(",")
+    tokens = [t.strip() for t in tokens if t and t.strip()]
+    if not tokens:
+        raise LidarfxError("no features requested")
+    extras = [t for t in tokens if t.lower() in EXTRA_INPUTS]
+    rest = [t for t in tokens if t.lower() not in EXTRA_INPUTS]
+    slots: tuple = ()
+    point: list[str] = []
+    if rest:
+        req = resolve(rest)
+        slots, point = req.slots, list(req.point)
+    rs = sorted(set(float(r) for r in (radii or [])))
+    if any(not (r > 0 and math.isfinite(r)) for r in rs):
+        raise LidarfxError(f"radii must be positive numbers, got {rs}")
+    if slots:
+        if neighbourhood == "knn":
+            if not k or k < 1:
+                raise LidarfxError("neighbourhood 'knn' needs k >= 1")
+            if len(rs) > 1:
+                raise LidarfxError("kNN takes at most one radius (the cap)")
+        elif not rs:
+            raise LidarfxError("give at least one radius for neighbourhood features (e.g. radii=[1, 2, 3])")
+    if len({scale_suffix(r) for r in rs}) != len(rs):
+        raise LidarfxError(f"radii must differ in the second decimal: {rs}")
+    names: list[str] = []
+    if slots:
+        suffixes = [f"_k{int(k)}"] if neighbourhood == "knn" else [scale_suffix(r) for r in rs]
+        for sfx in suffixes:
+            names += [S.NAMES[s] + sfx for s in slots]
+    names += point
+    seen = set()
+    for e in extras:
+        e = e.lower()
+        if e not in seen:
+            names.append(e)
+            seen.add(e)
+    return names, tuple(slots), point, rs
+
+
+# --------------------------------------------------------------------------- transformer
+class LidarFeatures(TransformerMixin, BaseEstimator):
+    """Per-point features of point clouds as a matrix (a scikit-learn transformer).
+
+    Parameters
+    ----------
+    features:
+        Feature groups or names (as for :func:`lidarfx.compute_features`) plus
+        the per-point inputs of :data:`EXTRA_INPUTS` (``height_above_ground``,
+        ``number_of_returns``, ``intensity``, ...).  Default
+        :data:`DEFAULT_FEATURES`.
+    radii:
+        Neighbourhood radii (m); every neighbourhood feature is computed at
+        every radius and named with the suffix ``_r1.00``.
+    neighbourhood, k, scanner, hist_bins:
+        Passed to the feature engine (``scanner`` orients TLS normals).
+    max_disc_points:
+        Neighbourhood density limit, as the mean number of points in a disc of
+        the smallest radius: density limit = max_disc_points / (π r_min²)
+        points per m² (density measured over occupied 2 m × 2 m cells, all
+        returns).  A denser cloud serves as neighbour cloud only through a
+        seeded random subset of that density; features are still computed for
+        every point.  Features then see about the point density the model was
+        trained on, and an 84 pts/m² cloud costs what a 40 pts/m² one does.
+        Default 125 (≈ 40 pts/m² at r = 1 m).  None = never thin.
+    hag_cap:
+        Upper limit of ``height_above_ground`` (m; None = no limit).  Default
+        5 m: enough to tell ground and low objects from the rest, without
+        letting the classifier key on absolute heights it cannot extrapolate.
+    ground:
+        Ground for ``height_above_ground``: ``"smrf"`` (default: the SMRF
+        filter of :mod:`lidarfx.ground`, which never looks at the
+        classification) or ``"class"`` (the cloud's class 2 points — only for
+        clouds whose ground is already classified; in an evaluation on labelled
+        data it leaks the reference).
+    precomputed:
+        Read the neighbourhood features from the cloud's attributes (e.g. a
+        file written by ``lidarfx features -r 1 -r 2 -r 4``) instead of
+        computing them; a missing one is an error.
+    progress:
+        Progress bars of the feature engine.
+    """
+
+    def __init__(
+        self,
+        features: Sequence[str] | str | None = None,
+        radii: Sequence[float] = DEFAULT_RADII,
+        neighbourhood: str = "sphere",
+        k: int | None = None,
+        scanner: Sequence[float] | None = None,
+        hist_bins: int = 10,
+        ground: str = "smrf",
+        hag_cap: float | None = DEFAULT_HAG_CAP,
+        max_disc_points: float | None = DEFAULT_MAX_DISC_POINTS,
+        precomputed: bool = False,
+        progress: bool | None = False,
+    ) -> None:
+        self.features = features
+        self.radii = radii
+        self.neighbourhood = neighbourhood
+        self.k = k
+        self.scanner = scanner
+        self.hist_bins = hist_bins
+        self.ground = ground
+        self.hag_cap = hag_cap
+        self.max_disc_points = max_disc_points
+        self.precomputed = precomputed
+        self.progress = progress
+
+    # ------------------------------------------------------------------ sklearn API
+    def _plan(self):
+        if self.ground not in ("smrf", "class"):
+            raise LidarfxError(f"ground must be 'smrf' or 'class', got {self.ground!r}")
+        if self.hag_cap is not None and not (self.hag_cap > 0):
+            raise LidarfxError(f"hag_cap must be a positive height in m or None, got {self.hag_cap!r}")
+        if self.max_disc_points is not None and not (self.max_disc_points > 0):
+            raise LidarfxError(f"max_disc_points must be a positive number or None, got {self.max_disc_points!r}")
+        names, slots, point, rs = feature_list(self.features, self.radii, self.neighbourhood, self.k)
+        return names, slots, point, rs
+
+    def fit(self, X: Any = None, y: Any = None) -> "LidarFeatures":
+        names, *_ = self._plan()
+        self.feature_names_out_ = np.asarray(names, dtype=object)
+        self.n_features_out_ = len(names)
+        return self
+
+    def get_feature_names_out(self, input_features: Any = None) -> np.ndarray:
+        if not hasattr(self, "feature_names_out_"):
+            self.fit()
+        return self.feature_names_out_.copy()
+
+    def transform(self, X: Any) -> np.ndarray:
+        if not hasattr(self, "feature_names_out_"):
+            self.fit()
+        names, slots, point, rs = self._plan()
+        if isinstance(X, np.ndarray) and X.ndim == 2:
+            if X.shape[1] != len(names):
+                raise LidarfxError(f"feature matrix has {X.shape[1]} columns, the transformer makes {len(names)}")
+            return X
+        samples = _as_samples(X)
+        if not samples:
+            return np.empty((0, len(names)), np.float32)
+        cache: dict[int, Any] = {}
+        blocks = [self._matrix(s, names, slots, point, rs, cache) for s in samples]
+        return np.vstack(blocks) if len(blocks) > 1 else blocks[0]
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.two_d_array = False
+        tags.requires_fit = False
+        return tags
+
+    # ------------------------------------------------------------------ internals
+    def check_cloud(self, cloud: PointCloud, name: str = "the cloud") -> None:
+        """Refuse a cloud that lacks a field the features need (clear one-line error)."""
+        names, *_ = self._plan()
+        for feat in names:
+            for field in _NEEDS.get(feat, ()):
+                if not _has_field(cloud, field):
+                    raise LidarfxError(
+                        f"the features include {feat!r} but {name} has no {field!r} "
+                        "(no return information / intensity); use a model trained without it"
+                    )
+        if self.precomputed:
+            need = [n for n in names if n not in EXTRA_INPUTS and n not in _NEEDS]
+            missing = [n for n in need if n not in cloud]
+            if missing:
+                rs = ", ".join(f"{r:g}" for r in sorted(set(float(r) for r in self.radii)))
+                have = sorted(n for n in cloud.names if "_r" in n or "_k" in n)[:6]
+                raise LidarfxError(
+                    f"{name} lacks {len(missing)} of the {len(need)} precomputed features the model needs "
+                    f"(e.g. {', '.join(missing[:4])}); the model was trained at radii {rs} m"
+                    + (f", the cloud has {', '.join(have)}" if have else "")
+                    + f" — compute them with: lidarfx features IN OUT {' '.join('-r ' + f'{r:g}' for r in sorted(set(float(r) for r in self.radii)))}"
+                    " --features ... (or predict without --precomputed)"
+                )
+
+    def _matrix(self, sample: "CloudSample", names, slots, point, rs, cache) -> np.ndarray:
+        from ..features.api import feature_arrays
+        from ..features.registry import Request
+
+        cloud, idx = sample.cloud, sample.index
+        self.check_cloud(cloud, sample.name)
+        m = len(sample)
+        out = np.empty((m, len(names)), dtype=np.float32)
+        col = {n: i for i, n in enumerate(names)}
+        if slots and m:
+            if self.precomputed:
+                for n in names:
+                    if n in EXTRA_INPUTS or n in _NEEDS:
+                        continue
+                    v = np.asarray(cloud[n], dtype=np.float32)
+                    out[:, col[n]] = v if idx is None else v[idx]
+            else:
+                key = ("thin", id(cloud))
+                if key not in cache:
+                    limit = None
+                    if self.max_disc_points is not None and rs:
+                        limit = float(self.max_disc_points) / (math.pi * rs[0] ** 2)
+                    cache[key] = thinning_mask(cloud.xyz, limit)
+                keep = cache[key]
+                if keep is None:
+                    nb_xyz, q_xyz = cloud.xyz, (None if idx is None else cloud.xyz[idx])
+                else:
+                    nb_xyz, q_xyz = cloud.xyz[keep], (cloud.xyz if idx is None else cloud.xyz[idx])
+                arrays = feature_arrays(
+                    nb_xyz,
+                    Request(tuple(slots), ()),
+                    radii=rs or None,
+                    neighbourhood=self.neighbourhood,
+                    k=self.k,
+                    query_xyz=q_xyz,
+                    query_ids=idx,
+                    scanner=self.scanner,
+                    hist_bins=int(self.hist_bins),
+                    progress=self.progress,
+                )
+                from ..features import slots as S
+
+                sfx_of = ([f"_k{int(self.k)}"] if self.neighbourhood == "knn" else [scale_suffix(r) for r in rs])
+                single = len(sfx_of) == 1
+                for si, sfx in enumerate(sfx_of):
+                    for s in slots:
+                        key = S.NAMES[s] + ("" if single else sfx)
+                        out[:, col[S.NAMES[s] + sfx]] = arrays[key]
+        sel = (lambda a: a) if idx is None else (lambda a: a[idx])
+        for n in point:
+            if n == "return_ratio":
+                rn = sel(np.asarray(cloud["return_number"], dtype=np.float32))
+                nr = sel(np.asarray(cloud["number_of_returns"], dtype=np.float32))
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    out[:, col[n]] = np.where(nr > 0, rn / nr, np.nan)
+            else:  # pragma: no cover - the registry has no other per-point feature
+                raise LidarfxError(f"unknown per-point feature {n!r}")
+        for n in names:
+            if n not in EXTRA_INPUTS:
+                continue
+            if n == "height_above_ground":
+                if self.precomputed and "height_above_ground" in cloud:
+                    v = np.asarray(cloud["height_above_ground"], dtype=np.float32)
+                else:
+                    key = id(cloud)
+                    if key not in cache:
+                        cache[key] = hag(cloud, self.ground)
+                    v = cache[key]
+                if self.hag_cap is not None:
+                    v = np.minimum(v, np.float32(self.hag_cap))
+            elif n in ("number_of_returns", "return_number", "intensity"):
+                v = np.asarray(cloud[n], dtype=np.float32)
+            elif n == "intensity_norm":
+                key = ("int", id(cloud))
+                if key not in cache:
+                    it = np.asarray(cloud["intensity"], dtype=np.float32)
+                    med = float(np.median(it[it > 0])) if np.any(it > 0) else 1.0
+                    cache[key] = it / med
+                v = cache[key]
+            elif n == "z":
+                v = (cloud.z - cloud.z.min()).astype(np.float32) if len(cloud) else np.zeros(0, np.float32)
+            else:  # pragma: no cover
+                raise LidarfxError(f"unknown input {n!r}")
+            out[:, col[n]] = sel(v)
+        return out
+
+
+def point_density(xyz: np.ndarray, cell: float = 2.0) -> float:
+    """Points per m² over the occupied ``cell`` × ``cell`` squares (all returns)."""
+    if len(xyz) == 0:
+        return 0.0
+    ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    return float(len(xyz)) / (len(np.unique(key)) * cell * cell)
+
+
+def thinning_mask(xyz: np.ndarray, max_density: float | None, seed: int = 0) -> np.ndarray | None:
+    """Random subset (bool mask) bringing the density down to ``max_density``; None if not needed."""
+    if max_density is None:
+        return None
+    d = point_density(xyz)
+    if d <= max_density:
+        return None
+    return np.random.default_rng(seed).random(len(xyz)) < (max_density / d)
+
+
+def terrain_shear(cloud: PointCloud, seed: int = 0) -> PointCloud:
+    """A copy with z + f(x, y), f a smooth random terrain (training augmentation).
+
+    f = A·sin(2πx/Lx + φ) + B·sin(2πy/Ly + ψ), A, B ∈ [4, 10] m, Lx, Ly ∈
+    [60, 120] m, phases random (seeded): slopes up to about 45°.  A vertical
+    shift that depends only on (x, y) keeps walls and trunks vertical and leaves
+    the height above ground unchanged, so labels stay valid while the ground
+    (and roofs) get slopes the training tiles may not have.
+    """
+    rng = np.random.default_rng(seed)
+    a, b = rng.uniform(4.0, 10.0, 2)
+    lx, ly = rng.uniform(60.0, 120.0, 2)
+    px, py = rng.uniform(0.0, 2 * np.pi, 2)
+    xyz = cloud.xyz.copy()
+    loc = xyz[:, :2] - xyz[:, :2].min(axis=0) if len(xyz) else xyz[:, :2]
+    xyz[:, 2] += a * np.sin(2 * np.pi * loc[:, 0] / lx + px) + b * np.sin(2 * np.pi * loc[:, 1] / ly + py)
+    out = PointCloud(xyz, dict(cloud.attrs), cloud.header, cloud.meta)
+    out.meta = {**cloud.meta, "name": f"{cloud.meta.get('name', 'cloud')} (terrain-sheared)"}
+    return out
+
+
+def hag(cloud: PointCloud, ground: str = "smrf") -> np.ndarray:
+    """Height above ground of every point (float32); ground from SMRF or class 2."""
+    try:
+        from ..ground import classify_ground, height_above_ground
+    except ImportError as exc:  # pragma: no cover - the ground module ships with lidarfx
+        raise LidarfxError(f"height_above_ground needs lidarfx.ground ({exc})") from None
+    if ground == "class":
+        if "classification" not in cloud:
+            raise LidarfxError("ground='class' needs a classification with class 2")
+        mask = np.asarray(cloud["classification"]) == 2
+    else:
+        # ignore_classes=None: the filter must not look at the (reference) classes
+        mask = classify_ground(cloud, ignore_classes=None, progress=False)
+    if not mask.any():
+        raise LidarfxError("no ground found: height_above_ground is not computable for this cloud")
+    return np.asarray(height_above_ground(cloud, ground=mask), dtype=np.float32)
+
+
+def _as_samples(X: Any) -> list[CloudSample]:
+    if isinstance(X, PointCloud):
+        return [CloudSample(X)]
+    if isinstance(X, CloudSample):
+        return [X]
+    if isinstance(X, (list, tuple)):
+        out: list[CloudSample] = []
+        for item in X:
+            out += _as_samples(item)
+        return out
+    raise LidarfxError(
+        f"LidarFeatures.transform expects a PointCloud, a CloudSample, a list of them or a feature matrix, "
+        f"got {type(X).__name__}"
+    )
+
+
+# --------------------------------------------------------------------------- estimators
+def make_classifier(kind: str = "hgb", *, n_estimators: int | None = None, random_state: int = 0,
+                    n_jobs: int | None = None):
+    """A fresh scikit-learn classifier of the given kind (:data:`CLASSIFIERS`).
+
+    ``hgb``: 300 boosting iterations at most (early stopping on 10 % of the
+    training sample), learning rate 0.1, 31 leaves.  ``rf``: 100 trees,
+    ``max_features="sqrt"``.  ``nb``: Gaussian naive Bayes.  Class balance is
+    applied by sample weights at fit time (see :func:`lidarfx.classify.train`).
+    """
+    from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
+    from sklearn.naive_bayes import GaussianNB
+
+    kind = str(kind).lower()
+    if kind == "hgb":
+        return HistGradientBoostingClassifier(max_iter=int(n_estimators or 300), learning_rate=0.1,
+                                              max_leaf_nodes=31, random_state=random_state)
+    if kind == "rf":
+        return RandomForestClassifier(n_estimators=int(n_estimators or 100), n_jobs=n_jobs if n_jobs else -1,
+                                      random_state=random_state)
+    if kind == "nb":
+        return GaussianNB()
+    raise LidarfxError(f"classifier must be one of {', '.join(CLASSIFIERS)}, got {kind!r}")
+
+
+def make_imputer(kind: str):
+    """NaN handling step: median imputation for naive Bayes, pass-through otherwise."""
+    if str(kind).lower() == "nb":
+        from sklearn.impute import SimpleImputer
+
+        return SimpleImputer(strategy="median", keep_empty_features=True)
+    return "passthrough"
+
+
+def make_pipeline(features=None, radii=DEFAULT_RADII, classifier: str = "hgb", *, n_estimators: int | None = None,
+                  random_state: int = 0, n_jobs: int | None = None, **feature_params):
+    """``Pipeline([("features", LidarFeatures), ("impute", ...), ("classifier", ...)])``."""
+    from sklearn.pipeline import Pipeline
+
+    return Pipeline([
+        ("features", LidarFeatures(features=features, radii=radii, **feature_params)),
+        ("impute", make_imputer(classifier)),
+        ("classifier", make_classifier(classifier, n_estimators=n_estimators, random_state=random_state,
+                                       n_jobs=n_jobs)),
+    ])
+
+
+# --------------------------------------------------------------------------- sampling
+def balanced_sample(y: np.ndarray, max_per_class: int | None, seed: int = 0,
+                    groups: np.ndarray | None = None) -> np.ndarray:
+    """Indices of at most ``max_per_class`` points per class (y ≥ 0), drawn at random
+    without replacement; every point of a class smaller than the cap.  Sorted."""
+    y = np.asarray(y)
+    rng = np.random.default_rng(seed)
+    out = []
+    for c in np.unique(y[y >= 0]):
+        ii = np.flatnonzero(y == c)
+        if max_per_class and len(ii) > max_per_class:
+            ii = rng.choice(ii, int(max_per_class), replace=False)
+        out.append(ii)
+    return np.sort(np.concatenate(out)) if out else np.zeros(0, np.int64)

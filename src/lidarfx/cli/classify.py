@@ -1,0 +1,295 @@
+"""``lidarfx classify train|predict|evaluate``: supervised point classification."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from ._args import xyz
+
+EPILOG = """examples:
+  # train on labelled tiles (ground / vegetation 3+4+5 / building; other classes ignored)
+  lidarfx classify train tile1.laz tile2.laz tile3.laz --model als.skops --classes 2,3+4+5,6
+  # classify a new cloud (writes the LAS classification field; --confidence adds a float32 attribute)
+  lidarfx classify predict new.laz new_classified.laz --model als.skops --confidence
+  # honest evaluation: 3-fold CV with random AND spatial-block folds (20 m), report in ./eval
+  lidarfx classify evaluate tile*.laz --classes 2,3+4+5,6 --cv 3 --spatial-blocks 20 --out eval
+  # leave one tile out, and train on the tiles / test on other files
+  lidarfx classify evaluate tile*.laz --classes 2,3+4+5,6 --leave-one-out --test other1.laz other2.laz
+  # a trained model on labelled files
+  lidarfx classify evaluate other1.laz other2.laz --model als.skops --out eval_test
+  # Lang (seed 001): random forest vs naive Bayes on a TLS facade, multi-scale 0.1/0.3/0.5 m
+  lidarfx synth facade facade.laz --seed 1
+  #   (TLS: no thinning, no terrain augmentation, normals towards the scanner)
+  lidarfx classify evaluate facade.laz --classifier nb \\
+      --classes ground=2,vegetation=5,wall=6,roof=64,window=65,clutter=66 \\
+      --features eigen,plane,msac,height,histogram,distribution -r 0.1 -r 0.3 -r 0.5 --cv 3 \\
+      --scanner 6,-12,1.6 --max-disc-points 0 --terrain-augment 0 --spatial-blocks 4
+
+defaults: gradient boosting (--classifier hgb), features = the ALS default list
+(eigen, plane, slope-adaptive echo ratio, histogram, distribution at 1, 2 and
+3 m; return_ratio, number_of_returns, height_above_ground capped at 5 m), at most
+20 000 training points per class plus 10 000 per class from one terrain-sheared
+copy of the training files, class-balanced.  Metrics: OA, kappa, per class PA
+(producer's accuracy = recall), UA (user's accuracy = precision), F1, IoU,
+support; confusion matrix rows = reference, columns = predicted.
+Virtual points (return number 0), withheld and synthetic points are neither
+neighbours nor classified.  See docs/classification.md.
+"""
+
+TRAIN_EPILOG = """examples:
+  lidarfx classify train a.laz b.laz --model m.skops --classes 2,3+4+5,6
+  lidarfx classify train a.laz --model m.skops --classes ground=2,vegetation=3+4+5:5,building=6 \\
+      --classifier rf --features eigen,height -r 0.5 -r 1 --max-per-class 50000
+"""
+
+PREDICT_EPILOG = """examples:
+  lidarfx classify predict new.laz out.laz --model m.skops
+  lidarfx classify predict new_fx.laz out.laz --model m.skops --precomputed   # features already in the file
+"""
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+
+
+def _add_train_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("model")
+    g.add_argument("-f", "--features", default=None,
+                   help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
+                        "return_number, intensity, intensity_norm, z (default: the ALS list, see --help epilog)")
+    g.add_argument("-r", "--radius", type=float, action="append", default=None,
+                   help="neighbourhood radius in m (repeat for multi-scale; default 1, 2, 3)")
+    g.add_argument("--classes", default=None,
+                   help="class map: 2,3+4+5,6 (merge with +, name with ground=2; unlisted classes are ignored); "
+                        "default: every class found except 0, 1, 7, 18")
+    g.add_argument("--ignore", default=None, help="comma-separated class codes to leave out, e.g. 1,64")
+    g.add_argument("--classifier", choices=["hgb", "rf", "nb"], default="hgb",
+                   help="hgb = gradient boosting (default), rf = random forest, nb = Gaussian naive Bayes")
+    g.add_argument("--n-estimators", type=int, default=None,
+                   help="trees (rf, default 100) or boosting iterations (hgb, default 300)")
+    g.add_argument("--max-per-class", type=int, default=20000,
+                   help="training points drawn per class (0 = all), default %(default)s")
+    g.add_argument("--no-balance", action="store_true", help="no class-balanced sample weights")
+    g.add_argument("--ground", choices=["smrf", "class"], default="smrf",
+                   help="ground for height_above_ground: SMRF filter (default, label-free) or the file's class 2")
+    g.add_argument("--hag-cap", type=float, default=5.0,
+                   help="cap of height_above_ground in m (0 = none), default %(default)s")
+    g.add_argument("--max-disc-points", type=float, default=125.0,
+                   help="thin denser neighbour clouds to this mean number of points per disc of the smallest "
+                        "radius (125 = 40 pts/m² at 1 m; 0 = never thin), default %(default)s")
+    g.add_argument("--terrain-augment", type=int, default=1,
+                   help="terrain-sheared copies of the training files added to the training sample "
+                        "(0 = none), default %(default)s")
+    g.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere")
+    g.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn")
+    g.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z (TLS normals)")
+    g.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
+    g.add_argument("--precomputed", action="store_true",
+                   help="read neighbourhood features from the files' attributes instead of computing them")
+    g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier")
+    g.add_argument("--jobs", type=int, default=None,
+                   help="threads of the classifier fit (rf: all cores; hgb: 1 by default, see docs)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "classify",
+        help="supervised classification: train, predict, evaluate",
+        description="Supervised point classification (SPEC §5): train a model on labelled clouds, "
+                    "classify new clouds, evaluate with random and spatial-block cross-validation.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    cs = p.add_subparsers(dest="classify_command", metavar="SUBCOMMAND", parser_class=type(p))
+
+    t = cs.add_parser("train", help="train a model on labelled files", epilog=TRAIN_EPILOG,
+                      description="Train a point classifier on labelled point clouds and save it (skops).",
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    t.add_argument("files", nargs="+", help="labelled training clouds")
+    t.add_argument("-m", "--model", required=True, help="output model file (.skops)")
+    _add_train_options(t)
+    _add_common(t)
+    t.set_defaults(func=run_train)
+
+    pr = cs.add_parser("predict", help="classify a cloud with a trained model", epilog=PREDICT_EPILOG,
+                       description="Classify every point of a cloud with a trained model; writes the "
+                                   "classification field (and optionally a confidence attribute).",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    pr.add_argument("input", help="input point cloud")
+    pr.add_argument("output", help="output point cloud (format from the extension)")
+    pr.add_argument("-m", "--model", required=True, help="model file written by 'lidarfx classify train'")
+    pr.add_argument("--confidence", action="store_true", help="add a float32 'confidence' attribute (top probability)")
+    pr.add_argument("--precomputed", action="store_true",
+                    help="read the neighbourhood features from the input's attributes")
+    _add_common(pr)
+    pr.set_defaults(func=run_predict)
+
+    e = cs.add_parser("evaluate", help="cross-validate / test a model configuration", epilog=EPILOG,
+                      description="Evaluate: M-fold CV with random and spatial-block folds, leave-one-file-out, "
+                                  "train-on-A/test-on-B, or a trained model (--model) on labelled files.",
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    e.add_argument("files", nargs="+", help="labelled clouds (training files, or test files with --model)")
+    e.add_argument("--cv", type=int, default=None,
+                   help="M-fold cross-validation on FILES (default 3 unless --test/--leave-one-out/--model)")
+    e.add_argument("--spatial-blocks", type=float, default=20.0, metavar="SIZE",
+                   help="block size (m) of the spatial-block folds, default %(default)s; 0 = no block folds")
+    e.add_argument("--no-random-folds", action="store_true", help="skip the random-fold CV")
+    e.add_argument("--leave-one-out", action="store_true", help="leave one file out (train on the others)")
+    e.add_argument("--test", nargs="+", default=None, metavar="FILE",
+                   help="train on FILES, test on these files (per file and pooled)")
+    e.add_argument("-m", "--model", default=None, help="evaluate this trained model on FILES (no training)")
+    e.add_argument("--importance", action="store_true", help="impurity and permutation feature importance")
+    e.add_argument("--backward-elimination", action="store_true",
+                   help="Chehata-style backward feature elimination with a random forest (slow)")
+    e.add_argument("-o", "--out", default=None, metavar="DIR",
+                   help="write report.txt, report.json and confusion_*.png to DIR")
+    _add_train_options(e)
+    _add_common(e)
+    e.set_defaults(func=run_evaluate)
+
+    def _usage(args) -> int:
+        p.print_help(sys.stderr)
+        return 2
+
+    p.set_defaults(func=_usage)
+
+
+def _log(args):
+    if args.quiet:
+        return lambda msg: None
+    return lambda msg: print(msg, file=sys.stderr, flush=True)
+
+
+def _config(args):
+    from ..classify import TrainConfig
+    from ..classify.pipeline import DEFAULT_RADII
+
+    return TrainConfig(
+        features=args.features,
+        radii=args.radius if args.radius else list(DEFAULT_RADII),
+        neighbourhood=args.neighbourhood,
+        k=args.k,
+        scanner=args.scanner,
+        hist_bins=args.bins,
+        ground=args.ground,
+        hag_cap=args.hag_cap or None,
+        max_disc_points=args.max_disc_points or None,
+        terrain_augment=args.terrain_augment,
+        precomputed=args.precomputed,
+        classifier=args.classifier,
+        n_estimators=args.n_estimators,
+        max_per_class=args.max_per_class or None,
+        balance=not args.no_balance,
+        seed=args.seed,
+        n_jobs=args.jobs,
+    )
+
+
+def _ignore(args):
+    from ..errors import LidarfxError
+
+    if not args.ignore:
+        return None
+    try:
+        return [int(v) for v in args.ignore.split(",") if v.strip()]
+    except ValueError:
+        raise LidarfxError(f"--ignore takes comma-separated class codes, got {args.ignore!r}") from None
+
+
+def run_train(args) -> int:
+    from ..classify import train
+    from ..errors import LidarfxError
+
+    if not str(args.model).lower().endswith(".skops"):
+        raise LidarfxError(f"model file should end in .skops, got {args.model}")
+    say = _log(args)
+    t0 = time.perf_counter()
+    model = train(args.files, classes=args.classes, ignore=_ignore(args), config=_config(args), log=say)
+    model.save(args.model)
+    summary = {"model": args.model, "classes": model.classes.spec(), "features": len(model.feature_names),
+               "radii": model.radii, "classifier": model.meta["config"]["classifier"],
+               "training": model.meta["training"], "seconds": round(time.perf_counter() - t0, 3)}
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2)
+        print()
+    say(f"model -> {args.model} ({model.classes.spec()}; {len(model.feature_names)} features; "
+        f"{summary['seconds']:.1f} s)")
+    return 0
+
+
+def run_predict(args) -> int:
+    import numpy as np
+
+    from .. import io
+    from .._atomic import check_not_same_file
+    from ..classify import load_model
+
+    check_not_same_file(args.input, args.output)
+    say = _log(args)
+    t0 = time.perf_counter()
+    model = load_model(args.model)
+    if args.precomputed:
+        model.features.precomputed = True
+    cloud = io.read(args.input, progress=False if args.quiet else None)
+    model.check(cloud, args.input)
+    t1 = time.perf_counter()
+    out = model.classify(cloud, confidence=args.confidence, progress=False if args.quiet else None)
+    t2 = time.perf_counter()
+    io.write(out, args.output, progress=False if args.quiet else None)
+    t3 = time.perf_counter()
+    cls = np.asarray(out["classification"])
+    counts = {int(c): int(n) for c, n in zip(*np.unique(cls, return_counts=True))}
+    summary = {"input": args.input, "output": args.output, "model": args.model, "points": len(out),
+               "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
+               "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2)
+        print()
+    say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "
+        + ", ".join(f"class {c} {n:,}" for c, n in counts.items()) + f" ({t3 - t0:.1f} s)")
+    return 0
+
+
+def run_evaluate(args) -> int:
+    from ..classify import evaluate, evaluate_model, format_report, load_model, write_report
+    from ..classify.evaluate import report_json
+    from ..errors import LidarfxError
+
+    say = _log(args)
+    if args.model:
+        if args.test or args.cv or args.leave_one_out:
+            raise LidarfxError("--model evaluates a trained model on FILES; it does not take --cv/--test/--leave-one-out")
+        model = load_model(args.model)
+        if args.precomputed:
+            model.features.precomputed = True
+        sec = evaluate_model(model, args.files, log=say)
+        report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
+                  "config": model.meta["config"], "features": model.feature_names,
+                  "classes": model.classes.to_dict(), "class_spec": model.classes.spec(),
+                  "train_files": model.meta["training"]["files"], "sections": {"test": sec},
+                  "seconds": {"total": sec["seconds"]}, "model": args.model}
+    else:
+        cv = args.cv
+        if cv is None and not args.test and not args.leave_one_out:
+            cv = 3
+        if cv is not None and cv < 2:
+            raise LidarfxError("--cv needs at least 2 folds")
+        if args.spatial_blocks < 0:
+            raise LidarfxError("--spatial-blocks must be >= 0 (0 = no block folds)")
+        report = evaluate(
+            args.files, test=args.test, cv=cv, block_size=args.spatial_blocks or None,
+            random_cv=not args.no_random_folds, leave_one_out=args.leave_one_out, classes=args.classes,
+            ignore=_ignore(args), config=_config(args), importance=args.importance,
+            eliminate=args.backward_elimination, log=say,
+        )
+    if args.out:
+        written = write_report(report, args.out)
+        say(f"report -> {', '.join(str(p) for p in written)}")
+    if args.json:
+        print(report_json(report))
+    else:
+        print(format_report(report))
+    return 0
