@@ -181,12 +181,13 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, want_v1=True):
     lam[2] = max(_rayleigh(a00, a01, a02, a11, a12, a22, v3[0], v3[1], v3[2]) * mx, 0.0)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def eigen_features(lam, v3z, convention, col, out):
     """Write the eigen and Westin features (SPEC §3) for eigenvalues ``lam``.
 
     ``v3z`` is the z component of the normal (for verticality); ``col`` maps
-    feature slots to output columns (-1 = not requested).
+    feature slots to output columns (-1 = not requested).  Inlined into the
+    kernels; divisions by λ1 and Σλ are one reciprocal each.
     """
     l1, l2, l3 = lam[0], lam[1], lam[2]
     S.put(out, col, S.EIGENVALUE1, l1)
@@ -199,11 +200,13 @@ def eigen_features(lam, v3z, convention, col, out):
     tot = l1 + l2 + l3
     if l1 <= 0.0 or tot <= 0.0:
         return  # everything below divides by λ1: leave NaN
-    e1, e2, e3 = l1 / tot, l2 / tot, l3 / tot
-    S.put(out, col, S.LINEARITY, (l1 - l2) / l1)
-    S.put(out, col, S.PLANARITY, (l2 - l3) / l1)
-    S.put(out, col, S.SPHERICITY, l3 / l1)
-    S.put(out, col, S.ANISOTROPY, (l1 - l3) / l1)
+    il1 = 1.0 / l1
+    itot = 1.0 / tot
+    e1, e2, e3 = l1 * itot, l2 * itot, l3 * itot
+    S.put(out, col, S.LINEARITY, (l1 - l2) * il1)
+    S.put(out, col, S.PLANARITY, (l2 - l3) * il1)
+    S.put(out, col, S.SPHERICITY, l3 * il1)
+    S.put(out, col, S.ANISOTROPY, (l1 - l3) * il1)
     S.put(out, col, S.SURFACE_VARIATION, e3)
     want_omni = col[S.OMNIVARIANCE] >= 0
     want_ent = col[S.EIGENENTROPY] >= 0
@@ -217,13 +220,13 @@ def eigen_features(lam, v3z, convention, col, out):
         g2 = math.log(a2) if a2 > 0.0 else 0.0
         g3 = math.log(a3) if a3 > 0.0 else 0.0
         if want_omni:
-            omni = math.exp((g1 + g2 + g3) / 3.0) if (a1 > 0.0 and a2 > 0.0 and a3 > 0.0) else 0.0
+            omni = math.exp((g1 + g2 + g3) * (1.0 / 3.0)) if (a1 > 0.0 and a2 > 0.0 and a3 > 0.0) else 0.0
             S.put(out, col, S.OMNIVARIANCE, omni)
         if want_ent:
             S.put(out, col, S.EIGENENTROPY, -(a1 * g1 + a2 * g2 + a3 * g3))
     if l1 > l3:
         S.put(out, col, S.SFFI_X, (l1 - l2) / (l1 - l3))
-    S.put(out, col, S.SFFI_Y, l3 / l1)
+    S.put(out, col, S.SFFI_Y, l3 * il1)
     S.put(out, col, S.WESTIN_LINEAR, e1 - e2)
     S.put(out, col, S.WESTIN_PLANAR, 2.0 * (e2 - e3))
     S.put(out, col, S.WESTIN_SPHERICAL, 3.0 * e3)

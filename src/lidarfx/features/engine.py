@@ -20,8 +20,10 @@ sits in L1 cache:
 So several radii cost one walk of the largest, plus cheap passes over the
 buffer.  The caller passes the query points in grid order (for a whole cloud:
 the index's own sorted points), so consecutive queries share cached
-neighbours and results are written sequentially; the caller restores the
-original order afterwards, one feature at a time.
+neighbours.  Results of a chunk of 256 queries are collected point-major in a
+small per-thread tile and copied to the feature-major output at the end of
+the chunk (no strided writes to the large output); the caller restores the
+original point order afterwards, one feature at a time.
 """
 from __future__ import annotations
 
@@ -179,12 +181,13 @@ def point_features(
         or want_curv
         or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
     )
+    nfeat = out.shape[1]
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
-        buf = np.empty((3, 1024))
+        buf = np.empty((3, 1040))  # rows not 4 KiB apart (no 4K aliasing)
         acc = np.empty(_NACC)
         p2 = np.empty(6)
         quad = np.empty(27)
@@ -194,7 +197,12 @@ def point_features(
         v3 = np.empty(3)
         v2 = np.empty(3)
         work = np.empty(48)
-        for i in range(start + ch * chunk, min(stop, start + ch * chunk + chunk)):
+        i0 = start + ch * chunk
+        i1 = min(stop, i0 + chunk)
+        # results of this chunk, point-major (one point's features are adjacent),
+        # copied to the feature-major output at the end of the chunk
+        tile = np.empty((i1 - i0, nscale, nfeat), np.float32)
+        for i in range(i0, i1):
             row = i if per_point else 0
             qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
             # one walk of the widest neighbourhood, compacted into buf
@@ -206,7 +214,7 @@ def point_features(
             for s in range(nscale):
                 r = rad[row, s]
                 r2 = r * r
-                o = out[s, :, i]
+                o = tile[i - i0, s]
                 o[:] = np.nan
                 _sum_cov(buf, cnt, r2, height, cyl_kind, acc)
                 if need_cyl:
@@ -326,6 +334,11 @@ def point_features(
                     S.put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
                 if want_curv and plane_ok and n >= 6.0:
                     quadric_curvatures(quad, r, work, col, o)
+        for s in range(nscale):
+            for c in range(nfeat):
+                dst = out[s, c]
+                for i in range(i0, i1):
+                    dst[i] = tile[i - i0, s, c]
 
 
 @nb.njit(cache=True, inline="always")
