@@ -395,3 +395,37 @@ def test_height_above_ground_feature():
     unlabelled = compute_features(PointCloud(xyz), ["height_above_ground", "planarity"], radius=1.0, query=np.arange(8000, 9500))
     assert np.median(unlabelled["height_above_ground"]) == pytest.approx(6.0, abs=0.05)
     assert "height_above_ground" not in compute_features(PointCloud(xyz), "all", radius=1.0).meta["features"]
+
+
+@pytest.mark.parametrize(
+    "features,kw",
+    [
+        ("eigen,plane,density,return_ratio", {"radii": [0.3, 0.6]}),
+        ("msac,curvature,histogram", {"radius": 0.5}),
+        ("eigen", {"neighbourhood": "knn", "k": 12}),
+    ],
+)
+def test_stream_features_equal_compute_features(features, kw):
+    from lidarfx.features import stream_features
+
+    cloud = synth.plane(3.0, density=300.0, noise=0.01, seed=4, origin=(500000.0, 5000000.0, 100.0))
+    cloud["return_number"] = np.ones(len(cloud), np.uint8)
+    cloud["number_of_returns"] = np.full(len(cloud), 2, np.uint8)
+    ref = compute_features(cloud, features, **kw)
+    names, fill = stream_features(cloud, features, **kw)
+    assert names == ref.meta["features"]
+    cuts = [0, 1, 777, 1500, len(cloud)]  # uneven pieces, one of a single point
+    pieces = [fill(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+    for name in names:
+        got = np.concatenate([p[name] for p in pieces])
+        np.testing.assert_array_equal(got, ref[name], err_msg=name)
+
+
+def test_stream_features_checks_before_work():
+    from lidarfx.features import stream_features
+
+    cloud = synth.plane(1.0, density=100.0, seed=1)
+    with pytest.raises(LidarfxError, match="k >= 1"):
+        stream_features(cloud, "eigen", neighbourhood="knn")
+    with pytest.raises(LidarfxError, match="give a radius"):
+        stream_features(cloud, "eigen")

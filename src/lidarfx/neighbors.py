@@ -393,22 +393,54 @@ def _sort_runs_by_z(order, zs, start):
             zs[u + 1] = zv
 
 
-def _build(pts_local: np.ndarray, cell: float):
-    n = pts_local.shape[0]
-    ix = np.floor(pts_local[:, 0] / cell).astype(np.int64)
-    iy = np.floor(pts_local[:, 1] / cell).astype(np.int64)
-    nx = int(ix.max()) + 1 if n else 1
-    ny = int(iy.max()) + 1 if n else 1
-    key = ix * ny + iy
+@nb.njit(cache=True)
+def _column_keys(xyz, origin, cell, ny):
+    """Column key floor((x - ox) / cell) * ny + floor((y - oy) / cell) of every point."""
+    n = xyz.shape[0]
+    key = np.empty(n, np.int64)
+    for i in range(n):
+        key[i] = np.int64(math.floor((xyz[i, 0] - origin[0]) / cell)) * ny + np.int64(
+            math.floor((xyz[i, 1] - origin[1]) / cell)
+        )
+    return key
+
+
+@nb.njit(cache=True, parallel=True)
+def _sorted_local(xyz, origin, order):
+    """The points in index order, made local: xyz[order] - origin, without temporaries."""
+    n = order.shape[0]
+    pts = np.empty((n, 3))
+    for i in nb.prange(n):
+        j = order[i]
+        pts[i, 0] = xyz[j, 0] - origin[0]
+        pts[i, 1] = xyz[j, 1] - origin[1]
+        pts[i, 2] = xyz[j, 2] - origin[2]
+    return pts
+
+
+def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
+    """Sort the points into columns of ``cell`` (x, y made local by ``origin``), by z
+    inside each column.  Returns the sorted local points, the order and the column
+    tables.  Memory: one key and one order array besides the result."""
+    n = xyz.shape[0]
+    if n:
+        hi = xyz.max(axis=0)
+        nx = int(math.floor((hi[0] - origin[0]) / cell)) + 1
+        ny = int(math.floor((hi[1] - origin[1]) / cell)) + 1
+    else:
+        nx = ny = 1
+    key = _column_keys(xyz, origin, cell, ny)
     ncells = nx * ny
     dense = ncells <= 4 * n + 4096
     if dense:
-        order = _counting_sort(key, np.ascontiguousarray(pts_local[:, 2]), ncells)
+        order = _counting_sort(key, xyz[:, 2], ncells)  # z order = local z order
     else:
         # sparse grid (huge extent for the cell size): sort by z, then stably by column
-        oz = np.argsort(pts_local[:, 2], kind="stable")
+        oz = np.argsort(xyz[:, 2], kind="stable")
         order = oz[np.argsort(key[oz], kind="stable")]
+        del oz
     skey = key[order]
+    del key
     if n:
         brk = np.flatnonzero(np.diff(skey)) + 1
         cstart = np.concatenate(([0], brk)).astype(np.int64)
@@ -416,12 +448,14 @@ def _build(pts_local: np.ndarray, cell: float):
         ckey = skey[cstart]
     else:
         cstart = cend = ckey = np.zeros(0, np.int64)
+    del skey
     if dense:
         table = np.full(ncells, -1, np.int64)
         table[ckey] = np.arange(ckey.shape[0], dtype=np.int64)
     else:
         table = np.zeros(0, np.int64)
-    return order, cstart, cend, ckey, table, nx, ny
+    pts = _sorted_local(xyz, origin, order)
+    return pts, order, cstart, cend, ckey, table, nx, ny
 
 
 def default_cell_for_knn(pts_local: np.ndarray, k: int) -> float:
@@ -459,13 +493,12 @@ class NeighborIndex:
         self.origin = xyz.min(axis=0) if (origin is None and len(xyz)) else np.asarray(
             origin if origin is not None else np.zeros(3), dtype=np.float64
         )
-        local = xyz - self.origin
-        if len(local) and local.min() < 0:
+        if len(xyz) and (xyz.min(axis=0) < self.origin).any():
             raise LidarfxError("origin must not exceed the minimum coordinate")
         self.cell = float(cell)
-        order, cstart, cend, ckey, table, nx, ny = _build(local, self.cell)
+        pts, order, cstart, cend, ckey, table, nx, ny = _build(xyz, self.origin, self.cell)
         self.order = order  # sorted position -> original index
-        self.grid = Grid(np.ascontiguousarray(local[order]), cstart, cend, ckey, table, nx, ny, self.cell)
+        self.grid = Grid(pts, cstart, cend, ckey, table, nx, ny, self.cell)
 
     def __len__(self) -> int:
         return self.grid.pts.shape[0]

@@ -62,7 +62,7 @@ def run(args) -> int:
     import numpy as np
 
     from .. import io
-    from ..features import compute_features
+    from ..features import stream_features
 
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
@@ -70,7 +70,7 @@ def run(args) -> int:
     radii = args.radius or []
     if args.neighbourhood != "knn" and not radii:
         raise LidarfxError("give a radius: -r 0.5 (repeat -r for several scales)")
-    out = compute_features(
+    names, fill = stream_features(
         cloud,
         args.features,
         radii=radii,
@@ -82,30 +82,41 @@ def run(args) -> int:
         d_max=args.d_max,
         hist_bins=args.bins,
         seed=args.seed,
-        progress=progress,
-        inplace=True,
     )
+    # the features are computed chunk by chunk while the output is written
+    # (LAS/LAZ), so they never exist in memory for the whole file at once
+    placeholder = np.broadcast_to(np.float32(np.nan), len(cloud))
+    for name in names:
+        cloud[name] = placeholder
+    nan_count = dict.fromkeys(names, 0)
+
+    def counted(start: int, stop: int) -> dict:
+        values = fill(start, stop)
+        for name, v in values.items():
+            nan_count[name] += int(np.count_nonzero(np.isnan(v)))
+        return values
+
     t2 = time.perf_counter()
-    io.write(out, args.output, progress=progress)
+    io.write(cloud, args.output, progress=progress, fill=counted)
     t3 = time.perf_counter()
-    names = out.meta["features"]
+    n = max(len(cloud), 1)
     summary = {
         "input": args.input,
         "output": args.output,
-        "points": len(out),
+        "points": len(cloud),
         "radii": sorted(radii),
         "neighbourhood": args.neighbourhood,
         "features": names,
-        "nan_share": {n: round(float(np.isnan(out[n]).mean()), 6) for n in names if out[n].dtype.kind == "f"},
-        "seconds": {"read": round(t1 - t0, 3), "features": round(t2 - t1, 3), "write": round(t3 - t2, 3)},
+        "nan_share": {name: round(c / n, 6) for name, c in nan_count.items()},
+        "seconds": {"read": round(t1 - t0, 3), "index": round(t2 - t1, 3), "features_and_write": round(t3 - t2, 3)},
     }
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
         print(
-            f"{len(out):,} points, {len(names)} features -> {args.output} "
-            f"(read {t1 - t0:.2f} s, features {t2 - t1:.2f} s, write {t3 - t2:.2f} s)",
+            f"{len(cloud):,} points, {len(names)} features -> {args.output} "
+            f"(read {t1 - t0:.2f} s, index {t2 - t1:.2f} s, features + write {t3 - t2:.2f} s)",
             file=sys.stderr,
         )
     return 0

@@ -7,7 +7,7 @@
 """
 from __future__ import annotations
 
-from .api import compute_features, feature_arrays
+from .api import compute_features, feature_arrays, stream_features
 from .registry import DEFAULT_FEATURES, available, resolve
 
-__all__ = ["compute_features", "feature_arrays", "available", "resolve", "DEFAULT_FEATURES"]
+__all__ = ["compute_features", "feature_arrays", "stream_features", "available", "resolve", "DEFAULT_FEATURES"]

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numba as nb
 import numpy as np
@@ -80,6 +80,42 @@ def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:
     return np.argsort(key, kind="stable")
 
 
+def _suffixes(rs: list[float]) -> list[str]:
+    """Attribute-name suffix of every scale ("" for a single one)."""
+    return [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
+
+
+def _check_options(req, xyz, rs, neighbourhood, k, convention, hist_bins, height) -> None:
+    """Every parameter check of :func:`feature_arrays`, before any work."""
+    if neighbourhood not in NEIGHBOURHOODS:
+        raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
+    if convention not in CONVENTIONS:
+        raise LidarfxError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+    if not req.slots:
+        return
+    if neighbourhood == "knn":
+        if not k or k < 1:
+            raise LidarfxError("neighbourhood 'knn' needs k >= 1 (e.g. k=20)")
+        if len(rs) > 1:
+            raise LidarfxError("kNN takes at most one radius (the cap)")
+    elif not rs:
+        raise LidarfxError("give a radius (e.g. radius=0.5) or several radii")
+    elif len(set(_suffixes(rs))) < len(rs):
+        raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii at least 0.01 m apart")
+    if hist_bins < 2:
+        raise LidarfxError("hist_bins must be >= 2")
+    if height is not None and not height > 0:
+        raise LidarfxError("cylinder height limit must be > 0")
+    if len(xyz) == 0:
+        raise LidarfxError("the point cloud is empty")
+
+
+def _new_index(xyz: np.ndarray, neighbourhood: str, k: int | None, rs: list[float]) -> NeighborIndex:
+    """The index a feature run needs: cells of the largest radius (kNN: sized for k)."""
+    cell = default_cell_for_knn(xyz - xyz.min(0), k) if neighbourhood == "knn" else rs[-1]
+    return NeighborIndex(xyz, cell)
+
+
 def feature_arrays(
     xyz: np.ndarray,
     features: str | Iterable[str] | None = None,
@@ -109,30 +145,13 @@ def feature_arrays(
     """
     req = features if isinstance(features, Request) else resolve(features)
     xyz = np.asarray(xyz, dtype=np.float64)
-    if neighbourhood not in NEIGHBOURHOODS:
-        raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
-    if convention not in CONVENTIONS:
-        raise LidarfxError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
     if not req.slots:
+        _check_options(req, xyz, [], "sphere", k, convention, hist_bins, height)
         return {}
     rs = _radii(radius, radii)
-    if neighbourhood == "knn":
-        if not k or k < 1:
-            raise LidarfxError("neighbourhood 'knn' needs k >= 1 (e.g. k=20)")
-        if len(rs) > 1:
-            raise LidarfxError("kNN takes at most one radius (the cap)")
-    elif not rs:
-        raise LidarfxError("give a radius (e.g. radius=0.5) or several radii")
-    if hist_bins < 2:
-        raise LidarfxError("hist_bins must be >= 2")
-    if height is not None and not height > 0:
-        raise LidarfxError("cylinder height limit must be > 0")
-    if len(xyz) == 0:
-        raise LidarfxError("the point cloud is empty")
-
+    _check_options(req, xyz, rs, neighbourhood, k, convention, hist_bins, height)
     if index is None:
-        cell = default_cell_for_knn(xyz - xyz.min(0), k) if neighbourhood == "knn" else rs[-1]
-        index = NeighborIndex(xyz, cell)
+        index = _new_index(xyz, neighbourhood, k, rs)
     g = index.grid
     # queries in grid order: consecutive queries share cached neighbours and
     # results are written sequentially; ``perm[i]`` is the output row of query i
@@ -156,9 +175,7 @@ def feature_arrays(
         names_for_scale = [""]
     else:
         rad = np.asarray(rs, dtype=np.float64).reshape(1, -1)
-        names_for_scale = [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
-        if len(set(names_for_scale)) < len(names_for_scale):
-            raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii at least 0.01 m apart")
+        names_for_scale = _suffixes(rs)
     nscale = rad.shape[1]
     kind = KIND_CYLINDER if neighbourhood == "cylinder" else KIND_SPHERE
 
@@ -313,6 +330,62 @@ def compute_features(
     result.update(arrays)
     result.meta["features"] = list(req.point) + list(arrays)
     return result
+
+
+def stream_features(
+    cloud: PointCloud,
+    features: str | Iterable[str] | None = None,
+    *,
+    radius: float | None = None,
+    radii: Sequence[float] | None = None,
+    neighbourhood: str = "sphere",
+    k: int | None = None,
+    scanner: Sequence[float] | None = None,
+    height: float | None = None,
+    convention: str = "default",
+    d_max: float = 0.10,
+    hist_bins: int = 10,
+    msac_threshold: float | None = None,
+    msac_iterations: int = 100,
+    seed: int = 0,
+) -> tuple[list[str], Callable[[int, int], dict[str, np.ndarray]]]:
+    """The features of :func:`compute_features`, computed piece by piece.
+
+    Returns ``(names, fill)``: the attribute names in the order
+    :func:`compute_features` writes them, and ``fill(start, stop)``, which
+    computes the features of points ``start:stop`` of ``cloud`` (every point
+    stays a neighbour; one index is built here and shared) as a dict of
+    float32 arrays.  Values equal :func:`compute_features`' exactly.  Meant for
+    writers that stream (``lidarfx.write(cloud, path, fill=fill)``): a file's
+    features then never exist in memory all at once.  Parameters as in
+    :func:`compute_features`; every check runs here, before any work.
+    """
+    if not isinstance(cloud, PointCloud):
+        raise LidarfxError("stream_features expects a PointCloud (see lidarfx.read)")
+    req = resolve(features)
+    rs = _radii(radius, radii) if req.slots else []
+    _check_options(req, cloud.xyz, rs, neighbourhood, k, convention, hist_bins, height)
+    index = _new_index(cloud.xyz, neighbourhood, k, rs) if req.slots else None
+    point = {name: _point_feature(name, cloud) for name in req.point}
+    names = list(req.point)
+    if req.slots:
+        suffixes = [""] if neighbourhood == "knn" else _suffixes(rs)
+        names += [S.NAMES[slot] + sfx for sfx in suffixes for slot in req.slots]
+    opts = dict(
+        radii=rs, neighbourhood=neighbourhood, k=k, scanner=scanner, height=height,
+        convention=convention, d_max=d_max, hist_bins=hist_bins, msac_threshold=msac_threshold,
+        msac_iterations=msac_iterations, seed=seed, progress=False,
+    )
+
+    def fill(start: int, stop: int) -> dict[str, np.ndarray]:
+        out = {name: values[start:stop] for name, values in point.items()}
+        if req.slots:
+            ids = np.arange(start, stop, dtype=np.int64)
+            out.update(feature_arrays(cloud.xyz, req, query_xyz=cloud.xyz[start:stop], query_ids=ids,
+                                      index=index, **opts))
+        return out
+
+    return names, fill
 
 
 def _point_feature(name: str, cloud: PointCloud) -> np.ndarray:

@@ -23,7 +23,7 @@ import importlib
 import inspect
 import os
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -174,7 +174,14 @@ def read(
     return cloud
 
 
-def write(cloud: PointCloud, path: str | os.PathLike, *, progress: bool | None = None, **opts: Any) -> Path:
+def write(
+    cloud: PointCloud,
+    path: str | os.PathLike,
+    *,
+    progress: bool | None = None,
+    fill: Callable[[int, int], dict[str, np.ndarray]] | None = None,
+    **opts: Any,
+) -> Path:
     """Write ``cloud`` to ``path``; the extension chooses the format.
 
     The file is written to a temporary name in the target folder and renamed at
@@ -185,6 +192,12 @@ def write(cloud: PointCloud, path: str | os.PathLike, *, progress: bool | None =
     ``ascii``; text ``precision``, ``delimiter``; ``.npz`` ``compressed``.
     Unknown options raise :class:`LidarfxError`.
 
+    ``fill(start, stop)`` streams attributes: it returns the values of points
+    ``start:stop`` for attributes the cloud holds only as placeholders (e.g.
+    ``np.broadcast_to(np.float32(np.nan), n)``), and is called in order over
+    the whole cloud.  LAS/LAZ call it once per written chunk, so those
+    attributes never exist in full; other formats collect them first.
+
     Returns the output path.
     """
     p = Path(path)
@@ -192,7 +205,7 @@ def write(cloud: PointCloud, path: str | os.PathLike, *, progress: bool | None =
     allowed = [
         name
         for name, prm in inspect.signature(module.write).parameters.items()
-        if prm.kind is inspect.Parameter.KEYWORD_ONLY and name not in ("ext", "progress")
+        if prm.kind is inspect.Parameter.KEYWORD_ONLY and name not in ("ext", "progress", "fill")
     ]
     unknown = sorted(set(opts) - set(allowed))
     if unknown:
@@ -203,6 +216,11 @@ def write(cloud: PointCloud, path: str | os.PathLike, *, progress: bool | None =
     source = cloud.meta.get("source")
     if source:
         check_not_same_file(source, p)
+    if fill is not None:
+        if "fill" in inspect.signature(module.write).parameters:
+            opts["fill"] = fill
+        else:
+            cloud = _collect_filled(cloud, fill)
     with atomic_path(p) as tmp:
         try:
             module.write(cloud, tmp, ext=p.suffix.lower(), progress=progress, **opts)
@@ -213,6 +231,23 @@ def write(cloud: PointCloud, path: str | os.PathLike, *, progress: bool | None =
         except OSError as exc:  # disk full, permissions, ...
             raise LidarfxError(f"cannot write {p}: {exc.strerror or _one_line(exc)}") from exc
     return p
+
+
+def _collect_filled(cloud: PointCloud, fill: Callable[[int, int], dict[str, np.ndarray]]) -> PointCloud:
+    """A copy of ``cloud`` whose streamed attributes are filled in full."""
+    from .las import CHUNK_POINTS
+
+    out = PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
+    n = len(cloud)
+    full: dict[str, np.ndarray] = {}
+    for a in range(0, n, CHUNK_POINTS):
+        b = min(n, a + CHUNK_POINTS)
+        for name, values in fill(a, b).items():
+            if name not in full:
+                full[name] = np.empty(n, dtype=np.asarray(values).dtype)
+            full[name][a:b] = values
+    out.update(full)
+    return out
 
 
 # ---------------------------------------------------------------------- info

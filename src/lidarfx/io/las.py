@@ -29,7 +29,7 @@ import ctypes
 import re
 import struct
 from pathlib import Path
-from typing import Any, Iterator, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple
 
 import laspy
 import lazrs
@@ -65,6 +65,7 @@ READ_ERRORS = (
 )
 
 CHUNK_POINTS = 1 << 17
+WRITE_CHUNK_POINTS = 1 << 16  # smaller: a streamed write holds one chunk of features and records
 """Points per read/write chunk (about 4-20 MB of point records: memory stays flat while writing)."""
 _BLOCK_POINTS = 1 << 15
 """Points (un)packed at a time inside a chunk: field-by-field strided access stays in the CPU cache."""
@@ -384,9 +385,11 @@ class _Encoder(NamedTuple):
     field: _Field
     values: np.ndarray  # the validated source attribute
 
-    def stored(self, sl: slice) -> np.ndarray:
-        """Contiguous values of ``sl`` in the dtype they are stored with."""
-        f, values = self.field, self.values[sl]
+    def stored(self, sl: slice, values: np.ndarray | None = None) -> np.ndarray:
+        """Contiguous values of ``sl`` in the dtype they are stored with (``values``:
+        the values of exactly these points, when they come from a ``fill`` callback)."""
+        f = self.field
+        values = self.values[sl] if values is None else values
         if f.dim.kind == _dims.DimensionKind.BitField:
             return values.astype(np.uint8, copy=False)
         if f.scaled:
@@ -425,8 +428,10 @@ def _encode(
     encoders: list[_Encoder],
     start: int,
     stats: "_ExtraBytesStats",
+    filled: dict[str, np.ndarray] | None = None,
 ) -> None:
-    """Pack cloud points ``start : start + len(rec)`` into ``rec``."""
+    """Pack cloud points ``start : start + len(rec)`` into ``rec``; ``filled`` holds
+    the values of these points for attributes produced chunk by chunk."""
     raw = rec.array
     for b0 in range(0, len(rec), _BLOCK_POINTS):
         b1 = min(b0 + _BLOCK_POINTS, len(rec))
@@ -434,7 +439,9 @@ def _encode(
         for i, c in enumerate(_COORDS):
             out[c] = np.rint((xyz[sl, i] - header.offsets[i]) / header.scales[i])
         for enc in encoders:
-            f, stored = enc.field, enc.stored(sl)
+            chunk = filled.get(enc.field.attr) if filled else None
+            f = enc.field
+            stored = enc.stored(sl, None if chunk is None else chunk[b0:b1])
             if f.dim.kind == _dims.DimensionKind.BitField:
                 rec[b0:b1][f.dim.name] = stored
             elif f.element is None:
@@ -525,27 +532,33 @@ def write(
     progress: bool | None = None,
     point_format: int | None = None,
     scale: float | tuple[float, float, float] | None = None,
+    fill: Callable[[int, int], dict[str, np.ndarray]] | None = None,
 ) -> None:
     """Write ``cloud`` as LAS (``ext == ".las"``) or LAZ (``".laz"``, lazrs).
 
     ``point_format`` forces a point format (extra dimensions carried over);
     ``scale`` sets the coordinate scale(s) (offsets are kept when the
-    coordinates still fit, else recomputed).  See the module docstring.
+    coordinates still fit, else recomputed).  ``fill(start, stop)``, when
+    given, returns the values of points ``start:stop`` for some float
+    attributes that the cloud only holds as placeholders; it is called once per
+    written chunk, in order, so those attributes never exist in full.  See the
+    module docstring.
     """
     header = _target_header(cloud, point_format, scale)
     pf = header.point_format
     encoders = _encoders(cloud, pf)
     n = len(cloud)
     stats = _ExtraBytesStats(header)
-    buf = np.zeros(min(n, CHUNK_POINTS), dtype=pf.dtype())
+    buf = np.zeros(min(n, WRITE_CHUNK_POINTS), dtype=pf.dtype())
     compress = ext == ".laz"
     with open(path, "wb") as fh, laspy.LasWriter(fh, header, do_compress=compress, closefd=False) as writer:
         stats.detach(writer.header)
         with progress_bar(n, f"writing {Path(path).name}", progress) as advance:
-            for start in range(0, n, CHUNK_POINTS):
-                sl = slice(start, min(start + CHUNK_POINTS, n))
+            for start in range(0, n, WRITE_CHUNK_POINTS):
+                sl = slice(start, min(start + WRITE_CHUNK_POINTS, n))
                 rec = laspy.PackedPointRecord(buf[: sl.stop - sl.start], pf)
-                _encode(rec, header, cloud.xyz, encoders, start, stats)
+                filled = fill(sl.start, sl.stop) if fill is not None else None
+                _encode(rec, header, cloud.xyz, encoders, start, stats, filled)
                 writer.write_points(rec)
                 advance(sl.stop - sl.start)
         stats.apply(writer.header)
