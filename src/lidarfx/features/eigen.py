@@ -68,19 +68,66 @@ def _rayleigh(a00, a01, a02, a11, a12, a22, x, y, z):
     return a00 * x * x + a11 * y * y + a22 * z * z + 2.0 * (a01 * x * y + a02 * x * z + a12 * y * z)
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def eigh3_normal(a00, a01, a02, a11, a12, a22):
+    """Eigenvalues λ1 ≥ λ2 ≥ λ3 and the unit eigenvector of λ3 of a symmetric
+    (positive semi-definite) 3×3 matrix: ``(l1, l2, l3, nx, ny, nz, ok)``.
+
+    The normal-only path of :func:`eigh3`, written for a short dependency chain:
+    no rescaling, det(A − qI) computed alongside the square root, no
+    divisions by constants.  λ3 is the Rayleigh quotient of the eigenvector.
+    ``ok`` is False when λ3 is not the best separated eigenvalue (line-like
+    matrices, λ2 ≈ λ3): the eigenvector of λ3 is then ill-conditioned from the
+    rows of A − λ3 I and :func:`eigh3` takes Eberly's path (λ1's vector first).
+    """
+    q = (a00 + a11 + a22) * (1.0 / 3.0)
+    b00 = a00 - q
+    b11 = a11 - q
+    b22 = a22 - q
+    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
+    detb = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
+    if not (p2 > 1e-30 * (q * q) and p2 > 0.0):
+        # a multiple of the identity (or NaN input: q is NaN then)
+        lq = max(q, 0.0) if q == q else q
+        return lq, lq, lq, 0.0, 0.0, 1.0, True
+    p = math.sqrt(p2)
+    half_det = min(max(0.5 * detb / (p2 * p), -1.0), 1.0)
+    if half_det >= 0.0:
+        return q, q, q, 0.0, 0.0, 1.0, False
+    cphi = math.cos(math.acos(half_det) * (1.0 / 3.0))
+    sphi = math.sqrt(max(1.0 - cphi * cphi, 0.0))  # phi in [0, pi/3]
+    # roots 2cos(phi + 2πk/3): the largest, the smallest (k = 1) and the middle one
+    beta2 = 2.0 * cphi
+    beta0 = -cphi - 1.7320508075688772 * sphi
+    beta1 = -(beta0 + beta2)
+    e_lo = q + p * beta0
+    wx, wy, wz, ok = _unit_cross_best(a00 - e_lo, a01, a02, a01, a11 - e_lo, a12, a02, a12, a22 - e_lo)
+    if not ok:
+        wx, wy, wz = 0.0, 0.0, 1.0
+    l3 = min(_rayleigh(a00, a01, a02, a11, a12, a22, wx, wy, wz), q + p * beta1)
+    l1 = q + p * beta2
+    return max(l1, 0.0), max(3.0 * q - l1 - l3, 0.0), max(l3, 0.0), wx, wy, wz, True
+
+
 @nb.njit(cache=True, error_model="numpy")
 def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, want_v1=True):
     """Eigen-decomposition of a symmetric 3×3 matrix.
 
     Writes eigenvalues λ1 ≥ λ2 ≥ λ3 into ``lam`` (tiny negatives clipped to 0),
     the unit eigenvector of λ3 into ``v3`` and, with ``want_v1``, the one of λ1
-    into ``v1`` (v2 = v3 × v1); without it ``v1`` is left untouched and the
-    solve is about a third cheaper.  Eigenvalues come
+    into ``v1`` (v2 = v3 × v1); without it ``v1`` is usually left untouched
+    and the solve is :func:`eigh3_normal` (about 40 % cheaper) when that is
+    well conditioned.  Eigenvalues come
     from the trigonometric solution of the characteristic cubic, eigenvectors
     from Eberly's robust construction, and the final eigenvalues are the
     Rayleigh quotients of the eigenvectors (error O(eps²) instead of the
     O(eps·λ1) of the cubic, which matters for λ3 ≈ 0 on planes).
     """
+    if not want_v1:
+        l1, l2, l3, nx, ny, nz, ok = eigh3_normal(a00, a01, a02, a11, a12, a22)
+        if ok:
+            lam[0], lam[1], lam[2], v3[0], v3[1], v3[2] = l1, l2, l3, nx, ny, nz
+            return
     mx = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
     if mx == 0.0 or not np.isfinite(mx):
         lam[0] = lam[1] = lam[2] = 0.0 if mx == 0.0 else np.nan
@@ -122,20 +169,6 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, want_v1=True):
     beta0 = -cphi - 1.7320508075688772 * sphi
     beta1 = -(beta0 + beta2)
     e_mid = q + p * beta1
-    if not want_v1:
-        # normal only: v3 from the rows of A - λ3 I, λ3 as its Rayleigh quotient,
-        # λ1 from the cubic, λ2 from the trace
-        e_lo = q + p * beta0
-        wx, wy, wz, ok = _unit_cross_best(a00 - e_lo, a01, a02, a01, a11 - e_lo, a12, a02, a12, a22 - e_lo)
-        if not ok:
-            wx, wy, wz = 0.0, 0.0, 1.0
-        v3[0], v3[1], v3[2] = wx, wy, wz
-        l3 = min(_rayleigh(a00, a01, a02, a11, a12, a22, wx, wy, wz), e_mid)
-        l1 = q + p * beta2
-        lam[0] = max(l1 * mx, 0.0)
-        lam[1] = max((3.0 * q - l1 - l3) * mx, 0.0)
-        lam[2] = max(l3 * mx, 0.0)
-        return
     # first the eigenvector of the best separated eigenvalue
     first_is_hi = half_det >= 0.0
     e0 = q + p * (beta2 if first_is_hi else beta0)
