@@ -249,21 +249,22 @@ def point_features(
                 cx = cy = cz = 0.0
                 nxv = nyv = nzv = 0.0
                 slope = 0.0
+                inv_n = 1.0 / n if n > 0.0 else 0.0
                 if n > 0.0:
-                    cx = acc[_SX] / n
-                    cy = acc[_SY] / n
-                    cz = acc[_SZ] / n
+                    cx = acc[_SX] * inv_n
+                    cy = acc[_SY] * inv_n
+                    cz = acc[_SZ] * inv_n
                     S.put(o, col, S.CENTROID_OFFSET, math.sqrt(cx * cx + cy * cy + cz * cz) / r)
                 if n >= 3.0 and need_solve:
                     eigh3(
-                        acc[_XX] / n - cx * cx, acc[_XY] / n - cx * cy, acc[_XZ] / n - cx * cz,
-                        acc[_YY] / n - cy * cy, acc[_YZ] / n - cy * cz, acc[_ZZ] / n - cz * cz,
+                        acc[_XX] * inv_n - cx * cx, acc[_XY] * inv_n - cx * cy, acc[_XZ] * inv_n - cx * cz,
+                        acc[_YY] * inv_n - cy * cy, acc[_YZ] * inv_n - cy * cz, acc[_ZZ] * inv_n - cz * cz,
                         lam, v1, v3, need_v1,
                     )
                     nxv, nyv, nzv = orient_normal(v3[0], v3[1], v3[2], qx, qy, qz, scanner, has_scanner)
                     if want_eigen:
                         eigen_features(lam, nzv, convention, col, o)
-                    slope = write_plane(o, col, S.NORMAL_X, nxv, nyv, nzv, cx, cy, cz)
+                    slope = write_plane(o, col, S.NORMAL_X, nxv, nyv, nzv, cx, cy, cz, want_slope)
                     S.put(o, col, S.PLANE_STD, math.sqrt(lam[2]))
                     e1x, e1y, e1z = v1[0], v1[1], v1[2]
                     if e1z < 0.0 or (e1z == 0.0 and e1x < 0.0):

@@ -154,7 +154,7 @@ def msac_features(
                     ss += e * e
                     nin2 += 1
             o = out[scale, :, i]
-            write_plane(o, col, S.MSAC_NORMAL_X, nxv, nyv, nzv, cx, cy, cz)
+            write_plane(o, col, S.MSAC_NORMAL_X, nxv, nyv, nzv, cx, cy, cz, False)
             if nin2 > 0:
                 S.put(o, col, S.MSAC_PLANE_STD, math.sqrt(ss / nin2))
             S.put(o, col, S.MSAC_INLIER_RATIO, nin2 / cnt)

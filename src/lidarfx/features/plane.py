@@ -31,13 +31,16 @@ def slope_deg(nz):
 
 
 @nb.njit(cache=True)
-def write_plane(o, col, first, nx, ny, nz, cx, cy, cz):
+def write_plane(o, col, first, nx, ny, nz, cx, cy, cz, need_slope):
     """Write normal x/y/z, slope, aspect and plane distance into the six consecutive
-    slots starting at ``first`` (NORMAL_X or MSAC_NORMAL_X); returns the slope.
+    slots starting at ``first`` (NORMAL_X or MSAC_NORMAL_X); returns the slope —
+    computed only when requested (slope or aspect) or ``need_slope``, else 0.
 
     (cx, cy, cz) is the plane's centroid relative to the query point.
     """
-    slope = slope_deg(nz)
+    slope = 0.0
+    if need_slope or col[first + 3] >= 0 or col[first + 4] >= 0:
+        slope = slope_deg(nz)
     S.put(o, col, first, nx)
     S.put(o, col, first + 1, ny)
     S.put(o, col, first + 2, nz)
