@@ -235,13 +235,12 @@ def write(
 
 def _collect_filled(cloud: PointCloud, fill: Callable[[int, int], dict[str, np.ndarray]]) -> PointCloud:
     """A copy of ``cloud`` whose streamed attributes are filled in full."""
-    from .las import CHUNK_POINTS
-
     out = PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
     n = len(cloud)
     full: dict[str, np.ndarray] = {}
-    for a in range(0, n, CHUNK_POINTS):
-        b = min(n, a + CHUNK_POINTS)
+    step = 1 << 16
+    for a in range(0, n, step):
+        b = min(n, a + step)
         for name, values in fill(a, b).items():
             if name not in full:
                 full[name] = np.empty(n, dtype=np.asarray(values).dtype)

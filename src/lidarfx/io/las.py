@@ -65,8 +65,9 @@ READ_ERRORS = (
 )
 
 CHUNK_POINTS = 1 << 17
-WRITE_CHUNK_POINTS = 1 << 16  # smaller: a streamed write holds one chunk of features and records
-"""Points per read/write chunk (about 4-20 MB of point records: memory stays flat while writing)."""
+"""Points per read chunk (about 4-20 MB of point records)."""
+WRITE_CHUNK_POINTS = 1 << 16
+"""Points per written chunk: a streamed write (``fill``) holds one chunk of records and features."""
 _BLOCK_POINTS = 1 << 15
 """Points (un)packed at a time inside a chunk: field-by-field strided access stays in the CPU cache."""
 
