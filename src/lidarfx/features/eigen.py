@@ -115,13 +115,13 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, want_v1=True):
 
     Writes eigenvalues λ1 ≥ λ2 ≥ λ3 into ``lam`` (tiny negatives clipped to 0),
     the unit eigenvector of λ3 into ``v3`` and, with ``want_v1``, the one of λ1
-    into ``v1`` (v2 = v3 × v1); without it ``v1`` is usually left untouched
-    and the solve is :func:`eigh3_normal` (about 40 % cheaper) when that is
-    well conditioned.  Eigenvalues come
-    from the trigonometric solution of the characteristic cubic, eigenvectors
-    from Eberly's robust construction, and the final eigenvalues are the
-    Rayleigh quotients of the eigenvectors (error O(eps²) instead of the
-    O(eps·λ1) of the cubic, which matters for λ3 ≈ 0 on planes).
+    into ``v1`` (v2 = v3 × v1).  Without ``want_v1`` the solve is
+    :func:`eigh3_normal` (about 40 % cheaper) wherever that is well conditioned,
+    and ``v1`` is then left untouched.  Eigenvalues come from the trigonometric
+    solution of the characteristic cubic, eigenvectors from Eberly's robust
+    construction, and the final eigenvalues are the Rayleigh quotients of the
+    eigenvectors (error O(eps²) instead of the O(eps·λ1) of the cubic, which
+    matters for λ3 ≈ 0 on planes).
     """
     if not want_v1:
         l1, l2, l3, nx, ny, nz, ok = eigh3_normal(a00, a01, a02, a11, a12, a22)
