@@ -27,6 +27,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 
 from ..cloud import PointCloud
 from ..errors import LidarfxError
+from ..features.api import check_options, radii_list, scale_suffix
 
 __all__ = [
     "CloudSample",
@@ -104,10 +105,6 @@ CLASSIFIERS: dict[str, str] = {
     "rf": "RandomForestClassifier (Breiman; handles NaN)",
     "nb": "GaussianNB (Gaussian naive Bayes; NaN replaced by the training median)",
 }
-
-
-def scale_suffix(radius: float) -> str:
-    return f"_r{radius:.2f}"
 
 
 # --------------------------------------------------------------------------- inputs
@@ -188,20 +185,11 @@ def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | 
     rest = [t for t in tokens if t.lower() not in EXTRA_INPUTS]
     slots: tuple = ()
     point: list[str] = []
+    rs = radii_list(None, radii)
     if rest:
         req = resolve(rest)
         slots, point = req.slots, list(req.point)
-    rs = sorted(set(float(r) for r in (radii or [])))
-    if any(not (r > 0 and math.isfinite(r)) for r in rs):
-        raise LidarfxError(f"radii must be positive numbers, got {rs}")
-    if slots:
-        if neighbourhood == "knn":
-            if not k or k < 1:
-                raise LidarfxError("neighbourhood 'knn' needs k >= 1")
-            if len(rs) > 1:
-                raise LidarfxError("kNN takes at most one radius (the cap)")
-        elif not rs:
-            raise LidarfxError("give at least one radius for neighbourhood features (e.g. radii=[1, 2, 3])")
+        check_options(req, rs, neighbourhood, k)  # the feature engine's own checks
     if len({scale_suffix(r) for r in rs}) != len(rs):
         raise LidarfxError(f"radii must differ in the second decimal: {rs}")
     names: list[str] = []

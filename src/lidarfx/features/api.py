@@ -26,7 +26,8 @@ def scale_suffix(radius: float) -> str:
     return f"_r{radius:.2f}"
 
 
-def _radii(radius, radii) -> list[float]:
+def radii_list(radius, radii) -> list[float]:
+    """``radius`` and/or ``radii`` as one sorted list of distinct positive radii."""
     if radii is None and radius is None:
         return []
     vals: list[float] = []
@@ -85,8 +86,9 @@ def _suffixes(rs: list[float]) -> list[str]:
     return [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
 
 
-def _check_options(req, xyz, rs, neighbourhood, k, convention, hist_bins, height) -> None:
-    """Every parameter check of :func:`feature_arrays`, before any work."""
+def check_options(req, rs, neighbourhood="sphere", k=None, convention="default", hist_bins=10, height=None) -> None:
+    """Every parameter check of :func:`feature_arrays` (request ``req``, radii
+    ``rs`` from :func:`radii_list`), before any work."""
     if neighbourhood not in NEIGHBOURHOODS:
         raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
     if convention not in CONVENTIONS:
@@ -106,6 +108,9 @@ def _check_options(req, xyz, rs, neighbourhood, k, convention, hist_bins, height
         raise LidarfxError("hist_bins must be >= 2")
     if height is not None and not height > 0:
         raise LidarfxError("cylinder height limit must be > 0")
+
+
+def _check_not_empty(xyz: np.ndarray) -> None:
     if len(xyz) == 0:
         raise LidarfxError("the point cloud is empty")
 
@@ -146,10 +151,11 @@ def feature_arrays(
     req = features if isinstance(features, Request) else resolve(features)
     xyz = np.asarray(xyz, dtype=np.float64)
     if not req.slots:
-        _check_options(req, xyz, [], "sphere", k, convention, hist_bins, height)
+        check_options(req, [], neighbourhood, k, convention, hist_bins, height)
         return {}
-    rs = _radii(radius, radii)
-    _check_options(req, xyz, rs, neighbourhood, k, convention, hist_bins, height)
+    rs = radii_list(radius, radii)
+    check_options(req, rs, neighbourhood, k, convention, hist_bins, height)
+    _check_not_empty(xyz)
     if index is None:
         index = _new_index(xyz, neighbourhood, k, rs)
     g = index.grid
@@ -363,8 +369,10 @@ def stream_features(
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("stream_features expects a PointCloud (see lidarfx.read)")
     req = resolve(features)
-    rs = _radii(radius, radii) if req.slots else []
-    _check_options(req, cloud.xyz, rs, neighbourhood, k, convention, hist_bins, height)
+    rs = radii_list(radius, radii) if req.slots else []
+    check_options(req, rs, neighbourhood, k, convention, hist_bins, height)
+    if req.slots:
+        _check_not_empty(cloud.xyz)
     index = _new_index(cloud.xyz, neighbourhood, k, rs) if req.slots else None
     point = {name: _point_feature(name, cloud) for name in req.point}
     names = list(req.point)
