@@ -219,6 +219,59 @@ def test_height_above_ground_is_capped():
     assert raw.max() > 11
 
 
+FOOT_WKT = (
+    'PROJCS["NAD83 / test (ftUS)",GEOGCS["NAD83",DATUM["North_American_Datum_1983",'
+    'SPHEROID["GRS 1980",6378137,298.257222101]],UNIT["degree",0.0174532925199433]],'
+    'PROJECTION["Transverse_Mercator"],UNIT["US survey foot",0.3048006096012192]]'
+)
+
+
+def test_features_are_metres_on_a_feet_cloud(tmp_path, facades):
+    """A cloud in US feet (CRS unit) gives the features of the same cloud in metres:
+    radii, thinning density, HAG and its cap are metres whatever the coordinate unit."""
+    import laspy
+
+    a, _ = facades
+    u = 0.3048006096012192
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.offsets = np.zeros(3)
+    header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(FOOT_WKT))
+    las = laspy.LasData(header)
+    ft = a.xyz / u
+    las.x, las.y, las.z = ft[:, 0], ft[:, 1], ft[:, 2]
+    las.classification = a["classification"]
+    las.write(tmp_path / "feet.las")
+    feet = lidarfx.read(tmp_path / "feet.las")
+    assert lidarfx.ground.cloud_crs(feet)["unit_to_metre"] == pytest.approx(u)
+    metres = lidarfx.PointCloud(feet.xyz * u, {"classification": feet["classification"]})
+    # thinned (150 pts/m² > 20 / (π 0.3²) = 71 pts/m²): the density is compared in m² too
+    tr = LidarFeatures("eigen,plane,histogram,height_above_ground", [0.3, 0.5], max_disc_points=20).fit()
+    names = list(tr.get_feature_names_out())
+    idx = np.arange(0, len(feet), 13)
+    xf, xm = tr.transform(CloudSample(feet, idx)), tr.transform(CloudSample(metres, idx))
+    h = names.index("height_above_ground")
+    geo = [i for i in range(len(names)) if i != h]
+    np.testing.assert_allclose(xf[:, geo], xm[:, geo], rtol=1e-4, atol=1e-5, equal_nan=True)
+    # HAG: the same SMRF ground (its parameters are converted to feet), heights in metres
+    assert np.mean(np.abs(xf[:, h] - xm[:, h]) < 0.01) > 0.99
+    assert np.nanmax(xf[:, h]) == pytest.approx(5.0)
+    # spatial blocks are metres too: 4 m blocks of the feet cloud = those of the metre cloud
+    from lidarfx.classify.evaluate import _file_features
+    from lidarfx.classify.model import Source, TrainConfig, resolve_classes
+
+    cfg = TrainConfig(features=["linearity"], radii=[0.5])
+    srcs = [Source("f", feet, np.ones(len(feet), bool), len(feet)),
+            Source("m", metres, np.ones(len(metres), bool), len(metres))]
+    cmap = resolve_classes(srcs[:1], FACADE6)
+    _, _, xy_f, _ = _file_features(srcs[:1], cmap, cfg, False)
+    _, _, xy_m, _ = _file_features(srcs[1:], cmap, cfg, False)
+    np.testing.assert_array_equal(block_folds(xy_f, 3, 4.0)[1], block_folds(xy_m, 3, 4.0)[1])
+    # precomputed features would be in feet: refused
+    with pytest.raises(LidarfxError, match="precomputed"):
+        LidarFeatures("linearity", [0.5], precomputed=True).fit().transform(feet)
+
+
 # --------------------------------------------------------------------------- model files
 def test_model_roundtrip_identical_predictions(tmp_path, facades, rf_model):
     _, b = facades

@@ -37,7 +37,7 @@ from .model import (
     sheared_sources,
     train,
 )
-from .pipeline import CloudSample, balanced_sample
+from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "cross_validate",
            "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
@@ -209,7 +209,7 @@ def _file_features(sources: list[Source], cmap: ClassMap, config: TrainConfig, p
         idx = np.flatnonzero(y >= 0)
         Xs.append(tr.transform(CloudSample(s.cloud, idx)))
         ys.append(y[idx])
-        xys.append(s.cloud.xyz[idx, :2])
+        xys.append(s.cloud.xyz[idx, :2] * unit_to_metre(s.cloud))  # blocks in metres
         gs.append(np.full(len(idx), i, np.int64))
     return np.vstack(Xs), np.concatenate(ys).astype(np.int64), np.vstack(xys), np.concatenate(gs)
 

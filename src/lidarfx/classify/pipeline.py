@@ -41,6 +41,7 @@ __all__ = [
     "usable_mask",
     "balanced_sample",
     "feature_list",
+    "unit_to_metre",
 ]
 
 #: radii of the default multi-scale run (m), chosen for ALS at 10–100 pts/m² (docs/classification.md)
@@ -331,6 +332,12 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                         "(no return information / intensity); use a model trained without it"
                     )
         if self.precomputed:
+            unit = unit_to_metre(cloud)
+            if unit != 1.0:
+                raise LidarfxError(
+                    f"{name} is in a unit of {unit:g} m (CRS), but precomputed features are in coordinate "
+                    "units while the model's are in metres; predict without --precomputed"
+                )
             need = [n for n in names if n not in EXTRA_INPUTS and n not in _NEEDS]
             missing = [n for n in need if n not in cloud]
             if missing:
@@ -350,6 +357,9 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
 
         cloud, idx = sample.cloud, sample.index
         self.check_cloud(cloud, sample.name)
+        # every length is computed in metres: radii, densities, HAG and the cap are metres, so
+        # a model trained on metre data works on a US-feet cloud and vice versa
+        unit = unit_to_metre(cloud)
         m = len(sample)
         out = np.empty((m, len(names)), dtype=np.float32)
         col = {n: i for i, n in enumerate(names)}
@@ -361,17 +371,18 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     v = np.asarray(cloud[n], dtype=np.float32)
                     out[:, col[n]] = v if idx is None else v[idx]
             else:
+                xyz = cloud.xyz if unit == 1.0 else cloud.xyz * unit
                 key = ("thin", id(cloud))
                 if key not in cache:
                     limit = None
                     if self.max_disc_points is not None and rs:
                         limit = float(self.max_disc_points) / (math.pi * rs[0] ** 2)
-                    cache[key] = thinning_mask(cloud.xyz, limit)
+                    cache[key] = thinning_mask(xyz, limit)
                 keep = cache[key]
                 if keep is None:
-                    nb_xyz, q_xyz = cloud.xyz, (None if idx is None else cloud.xyz[idx])
+                    nb_xyz, q_xyz = xyz, (None if idx is None else xyz[idx])
                 else:
-                    nb_xyz, q_xyz = cloud.xyz[keep], (cloud.xyz if idx is None else cloud.xyz[idx])
+                    nb_xyz, q_xyz = xyz[keep], (xyz if idx is None else xyz[idx])
                 arrays = feature_arrays(
                     nb_xyz,
                     Request(tuple(slots), ()),
@@ -380,7 +391,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     k=self.k,
                     query_xyz=q_xyz,
                     query_ids=idx,
-                    scanner=self.scanner,
+                    scanner=None if self.scanner is None else np.asarray(self.scanner, dtype=np.float64) * unit,
                     hist_bins=int(self.hist_bins),
                     progress=self.progress,
                 )
@@ -410,7 +421,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 else:
                     key = id(cloud)
                     if key not in cache:
-                        cache[key] = hag(cloud, self.ground)
+                        cache[key] = hag(cloud, self.ground) * np.float32(unit)
                     v = cache[key]
                 if self.hag_cap is not None:
                     v = np.minimum(v, np.float32(self.hag_cap))
@@ -424,7 +435,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     cache[key] = it / med
                 v = cache[key]
             elif n == "z":
-                v = (cloud.z - cloud.z.min()).astype(np.float32) if len(cloud) else np.zeros(0, np.float32)
+                v = ((cloud.z - cloud.z.min()) * unit).astype(np.float32) if len(cloud) else np.zeros(0, np.float32)
             else:  # pragma: no cover
                 raise LidarfxError(f"unknown input {n!r}")
             out[:, col[n]] = sel(v)
@@ -438,6 +449,14 @@ def point_density(xyz: np.ndarray, cell: float = 2.0) -> float:
     ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
     key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
     return float(len(xyz)) / (len(np.unique(key)) * cell * cell)
+
+
+def unit_to_metre(cloud: PointCloud) -> float:
+    """Metres per coordinate unit from the LAS header's CRS (1.0 for metres or an unknown unit)."""
+    from ..ground.dtm import cloud_crs
+
+    u = (cloud_crs(cloud) or {}).get("unit_to_metre")
+    return float(u) if u and u > 0 else 1.0
 
 
 def thinning_mask(xyz: np.ndarray, max_density: float | None, seed: int = 0) -> np.ndarray | None:
@@ -460,8 +479,9 @@ def terrain_shear(cloud: PointCloud, seed: int = 0) -> PointCloud:
     (and roofs) get slopes the training tiles may not have.
     """
     rng = np.random.default_rng(seed)
-    a, b = rng.uniform(4.0, 10.0, 2)
-    lx, ly = rng.uniform(60.0, 120.0, 2)
+    u = unit_to_metre(cloud)
+    a, b = rng.uniform(4.0, 10.0, 2) / u
+    lx, ly = rng.uniform(60.0, 120.0, 2) / u
     px, py = rng.uniform(0.0, 2 * np.pi, 2)
     xyz = cloud.xyz.copy()
     loc = xyz[:, :2] - xyz[:, :2].min(axis=0) if len(xyz) else xyz[:, :2]
