@@ -272,6 +272,35 @@ def test_features_are_metres_on_a_feet_cloud(tmp_path, facades):
         LidarFeatures("linearity", [0.5], precomputed=True).fit().transform(feet)
 
 
+@pytest.mark.parametrize("n_classes", [2, 3])
+def test_fast_boosting_prediction_equals_sklearn(n_classes):
+    """The numba tree walker gives scikit-learn's raw scores, probabilities and classes
+    exactly — NaN inputs (missing values sent left or right) included."""
+    from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
+    from sklearn.pipeline import Pipeline
+
+    from lidarfx.classify.fastpredict import FastBoosting, fast_estimator, predict, predict_proba
+
+    rng = np.random.default_rng(n_classes)
+    X = rng.normal(size=(3000, 6)).astype(np.float32)
+    y = (X[:, 0] + 0.5 * X[:, 1] ** 2 > 0.4).astype(int) + (n_classes == 3) * (X[:, 2] > 1.0)
+    X[rng.random(X.shape) < 0.05] = np.nan
+    clf = HistGradientBoostingClassifier(max_iter=40, random_state=0).fit(X, y * 2 + 1)  # classes 1, 3(, 5)
+    pipe = Pipeline([("impute", "passthrough"), ("classifier", clf)])
+    fast = fast_estimator(pipe)
+    assert isinstance(fast, FastBoosting)
+    Xt = rng.normal(size=(5000, 6)).astype(np.float32)
+    Xt[rng.random(Xt.shape) < 0.1] = np.nan
+    np.testing.assert_array_equal(fast.raw(Xt), clf._raw_predict(Xt))
+    np.testing.assert_array_equal(predict_proba(pipe, Xt), clf.predict_proba(Xt))
+    np.testing.assert_array_equal(predict(pipe, Xt), clf.predict(Xt))
+    assert set(np.unique(predict(pipe, Xt))) <= {1, 3, 5}
+    # anything else goes to scikit-learn
+    rf = RandomForestClassifier(n_estimators=5, random_state=0).fit(np.nan_to_num(X), y)
+    assert fast_estimator(rf) is None
+    np.testing.assert_array_equal(predict(rf, np.nan_to_num(Xt)), rf.predict(np.nan_to_num(Xt)))
+
+
 # --------------------------------------------------------------------------- model files
 def test_model_roundtrip_identical_predictions(tmp_path, facades, rf_model):
     _, b = facades
@@ -291,6 +320,12 @@ def test_model_roundtrip_other_classifiers(tmp_path, facades, kind):
     m = train(a, classes="2,5,6", classifier=kind, n_estimators=30, features="eigen", radii=[0.5], max_per_class=500)
     loaded = load_model(m.save(tmp_path / f"{kind}.skops"))
     np.testing.assert_array_equal(loaded.predict(b), m.predict(b))
+    # boosting predicts through the numba tree walker, with scikit-learn's exact answers
+    assert (loaded._fast() is not None) == (kind == "hgb")
+    X = loaded.feature_matrix(b)
+    codes, conf = loaded.predict(b, return_confidence=True)
+    np.testing.assert_array_equal(codes, loaded.classes.code_of(loaded.estimator.predict(X)))
+    np.testing.assert_array_equal(conf, loaded.estimator.predict_proba(X).max(axis=1).astype(np.float32))
 
 
 class Evil:

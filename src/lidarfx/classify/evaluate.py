@@ -37,6 +37,7 @@ from .model import (
     sheared_sources,
     train,
 )
+from .fastpredict import predict as fast_predict
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "cross_validate",
@@ -183,7 +184,7 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
             sa = tr[balanced_sample(y[tr], _aug_cap(config), config.seed + 1 + a)]
             Xf, yf = np.vstack([Xf, Xa[sa]]), np.concatenate([yf, y[sa]])
         est = config.fit_matrix(Xf, yf)
-        pred = est.predict(X[te])
+        pred = fast_predict(est, X[te])
         c = confusion_matrix(y[te], pred, n_classes)
         cm += c
         m = metrics(c)

@@ -252,6 +252,22 @@ class ClassifierModel:
         """The fitted part after the features (NaN handling + classifier), for scikit-learn tools."""
         return self.pipeline[1:]
 
+    def _fast(self):
+        """The numba tree walker for a boosting model (:mod:`.fastpredict`), else None."""
+        if not hasattr(self, "_fast_cache"):
+            from .fastpredict import fast_estimator
+
+            self._fast_cache = fast_estimator(self.estimator)
+        return self._fast_cache
+
+    def _proba_matrix(self, X: np.ndarray) -> np.ndarray:
+        fast = self._fast()
+        return fast.predict_proba(X) if fast is not None else self.estimator.predict_proba(X)
+
+    def _predict_matrix(self, X: np.ndarray) -> np.ndarray:
+        fast = self._fast()
+        return fast.predict(X) if fast is not None else self.estimator.predict(X)
+
     def __repr__(self) -> str:
         return (f"ClassifierModel({self.meta['config']['classifier']}, classes={self.classes.spec()!r}, "
                 f"{len(self.feature_names)} features, radii={self.radii})")
@@ -279,7 +295,7 @@ class ClassifierModel:
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
         X = self.feature_matrix(sub, progress=progress)
-        return self.estimator.predict_proba(X), usable
+        return self._proba_matrix(X), usable
 
     def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False):
         """Output class code of every point (int16); −1 where not predicted (virtual /
@@ -290,12 +306,12 @@ class ClassifierModel:
         X = self.feature_matrix(sub, progress=progress)
         codes = np.full(len(cloud), -1, dtype=np.int16)
         if return_confidence:
-            proba = self.estimator.predict_proba(X)
+            proba = self._proba_matrix(X)
             k = proba.argmax(axis=1)
             conf = np.full(len(cloud), np.nan, dtype=np.float32)
             conf[usable] = proba[np.arange(len(k)), k]
         else:
-            k = self.estimator.predict(X)
+            k = self._predict_matrix(X)
         codes[usable] = self.classes.code_of(k)
         return (codes, conf) if return_confidence else codes
 
