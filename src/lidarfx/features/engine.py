@@ -18,7 +18,10 @@ sits in L1 cache:
   height-difference histogram and the octant / above-below counts.
 
 So several radii cost one walk of the largest, plus cheap passes over the
-buffer.  The caller passes the query points in grid order (for a whole cloud:
+buffer.  When the buffer holds a whole cylinder column and there are several
+radii, it is first sorted (stably) into horizontal shells, so that the passes
+of radius r walk only the points within r (≈ 8 % less feature time for the
+classification default on `crop_1.laz`).  The caller passes the query points in grid order (for a whole cloud:
 the index's own sorted points), so consecutive queries share cached
 neighbours.  Results of a chunk of 256 queries are collected point-major in a
 small per-thread tile and copied to the feature-major output at the end of
@@ -182,12 +185,19 @@ def point_features(
         or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
     )
     nfeat = out.shape[1]
+    # unbounded cylinders hold whole columns (every point of a tree under the query): sort the
+    # gathered neighbours into horizontal shells once, so that scale s walks only the points
+    # within its radius (every criterion of every scale implies h² <= r_s²)
+    shells = need_cyl and nscale > 1
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
     for ch in nb.prange(nchunk):
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
         buf = np.empty((3, 1040))  # rows not 4 KiB apart (no 4K aliasing)
+        buf2 = np.empty((3, 1040))
+        shell = np.empty(1040, np.int64)
+        ends = np.empty(nscale, np.int64)
         acc = np.empty(_NACC)
         p2 = np.empty(6)
         quad = np.empty(27)
@@ -211,9 +221,36 @@ def point_features(
             zwin = max(height, rmax) if wide_cyl else rmax
             nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, rmax, zwin, lo, hi)
             buf, cnt = gather(pts, lo, hi, nr, qx, qy, qz, rmax * rmax, zwin, wide_cyl, buf)
+            if shells:
+                if buf2.shape[1] < buf.shape[1]:
+                    buf2 = np.empty((3, buf.shape[1]))
+                    shell = np.empty(buf.shape[1], np.int64)
+                ends[:] = 0
+                for j in range(cnt):
+                    h2 = buf[_BX, j] * buf[_BX, j] + buf[_BY, j] * buf[_BY, j]
+                    k = 0
+                    while k < nscale - 1 and h2 > rad[row, k] * rad[row, k]:
+                        k += 1
+                    shell[j] = k
+                    ends[k] += 1
+                for k in range(1, nscale):
+                    ends[k] += ends[k - 1]
+                for j in range(cnt - 1, -1, -1):  # stable: the points keep their order in a shell
+                    k = shell[j]
+                    ends[k] -= 1
+                    d = ends[k]
+                    buf2[_BX, d] = buf[_BX, j]
+                    buf2[_BY, d] = buf[_BY, j]
+                    buf2[_BZ, d] = buf[_BZ, j]
+                for k in range(nscale - 1):  # ends[k] now starts shell k: make it shell k's end
+                    ends[k] = ends[k + 1]
+                ends[nscale - 1] = cnt
+                buf, buf2 = buf2, buf
             for s in range(nscale):
                 r = rad[row, s]
                 r2 = r * r
+                if shells:
+                    cnt = ends[s]
                 o = tile[i - i0, s]
                 o[:] = np.nan
                 _sum_cov(buf, cnt, r2, height, cyl_kind, acc)
