@@ -21,9 +21,9 @@ So several radii cost one walk of the largest, plus cheap passes over the
 buffer.  When the buffer holds a whole cylinder column and there are several
 radii, it is first sorted (stably) into horizontal shells, so that the passes
 of radius r walk only the points within r (≈ 8 % less feature time for the
-classification default on `crop_1.laz`).  The caller passes the query points in grid order (for a whole cloud:
-the index's own sorted points), so consecutive queries share cached
-neighbours.  Results of a chunk of 256 queries are collected point-major in a
+classification default on `crop_1.laz`).  The caller passes the query points
+in grid order (for a whole cloud: the index's own sorted points), so
+consecutive queries share cached neighbours.  Results of a chunk of 256 queries are collected point-major in a
 small per-thread tile and copied to the feature-major output at the end of
 the chunk (no strided writes to the large output); the caller restores the
 original point order afterwards, one feature at a time.
