@@ -295,6 +295,14 @@ def test_fast_boosting_prediction_equals_sklearn(n_classes):
     np.testing.assert_array_equal(predict_proba(pipe, Xt), clf.predict_proba(Xt))
     np.testing.assert_array_equal(predict(pipe, Xt), clf.predict(Xt))
     assert set(np.unique(predict(pipe, Xt))) <= {1, 3, 5}
+    # permutation importance through the walker: scikit-learn's own numbers
+    from sklearn.inspection import permutation_importance as sk_pi
+
+    yt = clf.predict(np.nan_to_num(Xt[:800]))
+    ours = permutation_importance(pipe, Xt[:800], yt, n_repeats=2, seed=3)
+    ref = sk_pi(pipe, Xt[:800], yt, n_repeats=2, scoring="f1_macro", random_state=3)
+    assert {d["name"]: d["mean"] for d in ours} == {str(i): float(v) for i, v in enumerate(ref.importances_mean)}
+    assert ours[0]["mean"] > 0.05  # the informative columns matter
     # anything else goes to scikit-learn
     rf = RandomForestClassifier(n_estimators=5, random_state=0).fit(np.nan_to_num(X), y)
     assert fast_estimator(rf) is None

@@ -44,6 +44,25 @@ def impurity_importance(estimator: Any, names: Sequence[str] | None = None) -> l
     return [{"name": str(names[i]), "importance": float(imp[i])} for i in order]
 
 
+def _fast_scorer(estimator: Any, scoring: Any) -> Any:
+    """``scoring`` as a callable predicting through :mod:`.fastpredict` (same predictions,
+    4x faster for boosting); unchanged for other estimators and scorers."""
+    from .fastpredict import fast_estimator
+
+    if scoring not in ("f1_macro", "accuracy"):
+        return scoring
+    fast = fast_estimator(estimator)
+    if fast is None:
+        return scoring
+    from sklearn.metrics import accuracy_score, f1_score
+
+    def score(_est: Any, X: np.ndarray, y: np.ndarray) -> float:
+        pred = fast.predict(X)
+        return float(f1_score(y, pred, average="macro") if scoring == "f1_macro" else accuracy_score(y, pred))
+
+    return score
+
+
 def permutation_importance(estimator: Any, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, *,
                            n_repeats: int = 3, scoring: str = "f1_macro", max_points: int | None = 20_000,
                            seed: int = 0, n_jobs: int | None = None) -> list[dict[str, Any]]:
@@ -61,7 +80,7 @@ def permutation_importance(estimator: Any, X: np.ndarray, y: np.ndarray, names: 
     if max_points and len(y) > max_points:
         pick = np.sort(np.random.default_rng(seed).choice(len(y), max_points, replace=False))
         X, y = X[pick], y[pick]
-    res = _pi(est, X, y, n_repeats=n_repeats, scoring=scoring, random_state=seed, n_jobs=n_jobs)
+    res = _pi(est, X, y, n_repeats=n_repeats, scoring=_fast_scorer(est, scoring), random_state=seed, n_jobs=n_jobs)
     names = list(names) if names is not None else [str(i) for i in range(X.shape[1])]
     order = np.argsort(-res.importances_mean, kind="stable")
     return [{"name": str(names[i]), "mean": float(res.importances_mean[i]), "std": float(res.importances_std[i])}
