@@ -371,7 +371,10 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     v = np.asarray(cloud[n], dtype=np.float32)
                     out[:, col[n]] = v if idx is None else v[idx]
             else:
-                xyz = cloud.xyz if unit == 1.0 else cloud.xyz * unit
+                key = ("metres", id(cloud))
+                if key not in cache:  # once per cloud, not per chunk of queries
+                    cache[key] = cloud.xyz if unit == 1.0 else cloud.xyz * unit
+                xyz = cache[key]
                 key = ("thin", id(cloud))
                 if key not in cache:
                     limit = None
