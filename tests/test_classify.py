@@ -495,6 +495,7 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
         (["train", "{a}", "--model", "{d}/x.pkl", "--classes", "2,6"], "should end in .skops"),
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops"], "not found"),
         (["evaluate", "{a}", "--cv", "1"], "at least 2 folds"),
+        (["train", "{a}", "--model", "{d}/x.skops", "--density-augment", "0.5,2"], "between 0 and 1"),
         (["evaluate", "{a}", "--classes", "2,6", "--features", "eigen", "-r", "0.5", "--spatial-blocks", "5000",
           "--cv", "5", "--no-random-folds"], "spatial block"),  # the scene straddles x = 0, y = 0: 4 blocks
     ],
@@ -517,6 +518,108 @@ def test_cli_refuses_tampered_model(facade_files, tmp_path, capsys):
     sio.dump(obj, model)
     assert main(["classify", "predict", str(pb), str(tmp_path / "o.laz"), "--model", str(model), "-q"]) == 2
     assert "refusing to load" in capsys.readouterr().err
+
+
+def test_density_warning_api(facades, rf_model):
+    import warnings
+
+    from lidarfx.classify.model import DENSITY_WARN_RATIO, ClassifierModel, cloud_density
+    from lidarfx.classify.pipeline import point_density
+    from lidarfx.errors import LidarfxWarning
+
+    a, b = facades
+    files = rf_model.meta["training"]["files"]
+    assert files[0]["density"] == pytest.approx(point_density(a.xyz), rel=1e-3)
+    assert rf_model.training_density == pytest.approx(files[0]["density"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the second scene has the training density: no warning
+        info = rf_model.density_check(b)
+    assert 0.8 < info["ratio"] < 1.25 and info["density"] == pytest.approx(cloud_density(b), abs=0.01)
+    sparse = b.subset(np.random.default_rng(0).random(len(b)) < 0.3)  # 30 % of the points
+    with pytest.warns(LidarfxWarning, match=r"points/m² is \d+% of the sparsest training file"):
+        codes = rf_model.predict(sparse)
+    assert len(codes) == len(sparse)
+    info = rf_model.density_check(sparse, warn=False)
+    assert info["ratio"] < DENSITY_WARN_RATIO and info["ratio"] == pytest.approx(0.3, abs=0.05)
+    old = ClassifierModel(rf_model.pipeline, rf_model.classes, {**rf_model.meta, "training": {"files": []}})
+    assert old.density_check(sparse) is None  # models without a recorded density: no check
+
+
+def test_pulse_thinning_keeps_whole_pulses():
+    from lidarfx.classify.pipeline import pulse_thinning_mask
+
+    rng = np.random.default_rng(3)
+    n_pulses = 20_000
+    returns = rng.integers(1, 4, n_pulses)  # 1-3 returns per pulse
+    t = np.repeat(np.arange(n_pulses) * 1e-5 + 1e5, returns)
+    c = lidarfx.PointCloud(rng.random((len(t), 3)), {"gps_time": t})
+    m = pulse_thinning_mask(c, 0.25, seed=1)
+    kept_per_pulse = np.bincount(np.repeat(np.arange(n_pulses), returns), weights=m)
+    assert set(np.unique(kept_per_pulse / returns)) == {0.0, 1.0}  # all returns of a pulse or none
+    assert (kept_per_pulse > 0).mean() == pytest.approx(0.25, abs=0.01)
+    assert np.array_equal(m, pulse_thinning_mask(c, 0.25, seed=1))  # seeded
+    bare = lidarfx.PointCloud(c.xyz)  # no GPS time: points
+    assert pulse_thinning_mask(bare, 0.5, seed=0).mean() == pytest.approx(0.5, abs=0.02)
+
+
+def test_density_augment_train_and_cv(facades):
+    from lidarfx.classify.evaluate import _file_features, _thinned_features
+    from lidarfx.classify.model import read_sources, resolve_classes, thinned_sources
+
+    a = facades[0]
+    with pytest.raises(LidarfxError, match="between 0 and 1"):
+        TrainConfig(density_augment=[1.5])
+    m = train(a, classes=FACADE6, classifier="rf", n_estimators=10, density_augment=[0.5, 0.25], **SMALL)
+    counts = m.meta["training"]["counts"]
+    assert len(counts["density_augment"]) == 2
+    for copy in counts["density_augment"]:  # at most half of 2000 per class, fewer where a class is small
+        assert all(0 < v <= 1000 for v in copy.values()) and max(copy.values()) == 1000
+    assert m.meta["config"]["density_augment"] == [0.5, 0.25]
+    # CV rows of a thinned copy point at the same points of the full feature matrix
+    cfg = TrainConfig(classifier="rf", n_estimators=10, density_augment=[0.3], **SMALL)
+    srcs = read_sources([a])
+    cmap = resolve_classes(srcs, FACADE6)
+    X, y, xy, g = _file_features(srcs, cmap, cfg, False)
+    (copies,) = thinned_sources(srcs, cfg)
+    Xa, rows = _thinned_features(srcs, copies, cmap, cfg, False)
+    assert len(Xa) == len(rows) and 0.25 < len(rows) / len(y) < 0.35
+    keep = copies[0][1]
+    lab = cmap.index_of(srcs[0].cloud["classification"])
+    assert np.array_equal(xy[rows], srcs[0].cloud.xyz[keep][lab[keep] >= 0, :2])
+    rep = evaluate([a], classes=FACADE6, cv=2, block_size=None, config=cfg)
+    assert rep["sections"]["cv_random"]["metrics"]["oa"] > 0.9
+    assert rep["sections"]["cv_random"]["folds"][0]["train_points"] > 2000 * 6 * 0.9  # + the thinned sample
+
+
+def test_mostly_unusable_points_warn(facades, rf_model):
+    from lidarfx.errors import LidarfxWarning
+
+    b = facades[1].copy()
+    flag = np.zeros(len(b), np.uint8)
+    flag[: int(0.6 * len(b))] = 1
+    b["synthetic"] = flag
+    with pytest.warns(LidarfxWarning, match=r"of [\d,]+ points are not used \(flags: synthetic [\d,]+"):
+        out = rf_model.classify(b)
+    assert out.meta["classify"]["predicted_points"] == len(b) - int(flag.sum())
+
+
+def test_density_warning_cli(facade_files, tmp_path, capsys):
+    d, pa, pb = facade_files
+    model = tmp_path / "m.skops"
+    assert main(["classify", "train", str(pa), "--model", str(model), *CLI_MODEL]) == 0
+    b = lidarfx.read(pb)
+    sparse = tmp_path / "sparse.laz"
+    lidarfx.write(b.subset(np.random.default_rng(0).random(len(b)) < 0.3), sparse)
+    capsys.readouterr()
+    assert main(["classify", "predict", str(sparse), str(tmp_path / "o.laz"), "--model", str(model),
+                 "--json", "-q"]) == 0
+    cap = capsys.readouterr()
+    warn = [ln for ln in cap.err.splitlines() if ln.strip()]
+    assert len(warn) == 1 and warn[0].startswith("lidarfx: warning: ") and "sparsest training file" in warn[0]
+    summary = json.loads(cap.out)
+    assert summary["density"]["ratio"] < 0.5
+    assert main(["classify", "predict", str(pb), str(tmp_path / "o2.laz"), "--model", str(model), "-q"]) == 0
+    assert "warning" not in capsys.readouterr().err
 
 
 def test_cli_help_has_examples(capsys):

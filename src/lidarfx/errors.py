@@ -6,3 +6,7 @@ class LidarfxError(Exception):
 
 
 EXIT_USAGE = 2
+
+
+class LidarfxWarning(UserWarning):
+    """Something the user should know about a result (the CLI prints it as one line)."""

@@ -35,6 +35,7 @@ from .model import (
     read_sources,
     resolve_classes,
     sheared_sources,
+    thinned_sources,
     train,
 )
 from .fastpredict import predict as fast_predict
@@ -165,9 +166,11 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                    ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
     """Train on all folds but one (balanced sample, as :func:`train` does), predict the
     held-out fold, for every fold.  ``X_aug``: features of the same points in
-    terrain-sheared copies; the training part of each fold adds a balanced sample
-    of them like :func:`train`.  Returns the summed confusion matrix, per-fold
-    results and the fitted estimators with their held-out indices."""
+    terrain-sheared copies, or ``(Xa, rows)`` pairs for copies holding only some of
+    the points (thinned copies: row ``j`` of ``Xa`` is point ``rows[j]``); the
+    training part of each fold adds a balanced sample of them like :func:`train`.
+    Returns the summed confusion matrix, per-fold results and the fitted
+    estimators with their held-out indices."""
     from .model import _aug_cap
 
     cm = np.zeros((n_classes, n_classes), np.int64)
@@ -181,6 +184,12 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
         t0 = time.perf_counter()
         Xf, yf = X[s], y[s]
         for a, Xa in enumerate(X_aug):
+            if isinstance(Xa, tuple):  # a copy with a subset of the points
+                Xa, rows = Xa
+                ok = np.flatnonzero((folds[rows] != f) & (y[rows] >= 0))
+                pick = ok[balanced_sample(y[rows[ok]], _aug_cap(config), config.seed + 1 + a)]
+                Xf, yf = np.vstack([Xf, Xa[pick]]), np.concatenate([yf, y[rows[pick]]])
+                continue
             sa = tr[balanced_sample(y[tr], _aug_cap(config), config.seed + 1 + a)]
             Xf, yf = np.vstack([Xf, Xa[sa]]), np.concatenate([yf, y[sa]])
         est = config.fit_matrix(Xf, yf)
@@ -215,6 +224,20 @@ def _file_features(sources: list[Source], cmap: ClassMap, config: TrainConfig, p
     return np.vstack(Xs), np.concatenate(ys).astype(np.int64), np.vstack(xys), np.concatenate(gs)
 
 
+def _thinned_features(sources: list[Source], copies: list[tuple[Source, np.ndarray]], cmap: ClassMap,
+                      config: TrainConfig, progress: bool | None) -> tuple[np.ndarray, np.ndarray]:
+    """Features of the labelled points of thinned copies and their rows in :func:`_file_features`."""
+    tr = config.transformer(progress=progress)
+    Xs, rows, offset = [], [], 0
+    for s, (c, keep) in zip(sources, copies):
+        idx = np.flatnonzero(_labels(s, cmap) >= 0)
+        idx_c = np.flatnonzero(_labels(c, cmap) >= 0)
+        Xs.append(tr.transform(CloudSample(c.cloud, idx_c)))
+        rows.append(offset + np.searchsorted(idx, np.flatnonzero(keep)[idx_c]))
+        offset += len(idx)
+    return np.vstack(Xs), np.concatenate(rows)
+
+
 def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | None = False,
                    log: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Metrics of a trained model on labelled clouds: per file and pooled.
@@ -231,7 +254,8 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     for s in srcs:
         t = time.perf_counter()
         y = _labels(s, cmap)
-        codes = model.predict(s.cloud, progress=progress)
+        dens = model.density_check(s.cloud, s.name)
+        codes = model.predict(s.cloud, progress=progress, check_density=False)
         pred = cmap.index_of(np.clip(codes, 0, 255))
         cm = confusion_matrix(y, np.where(y >= 0, pred, 0), k)
         total += cm
@@ -239,6 +263,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         m["seconds"] = round(time.perf_counter() - t, 3)
         m["ignored_points"] = int((y < 0).sum())
         m["unusable_points"] = int(s.n_total - len(s.cloud))
+        m["density"] = dens
         files[s.name] = m
         if log:
             log(f"  {Path(s.name).name}: {m['points']:,} points, OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f} "
@@ -316,6 +341,7 @@ def evaluate(
         t0 = time.perf_counter()
         X, y, xy, g = _file_features(srcs, cmap, cfg, progress)
         X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
+        X_aug += [_thinned_features(srcs, copies, cmap, cfg, progress) for copies in thinned_sources(srcs, cfg)]
         report["seconds"]["cv_features"] = round(time.perf_counter() - t0, 3)
         say(f"features of {len(y):,} labelled points: {X.shape[1]} columns, {time.perf_counter() - t0:.1f} s")
         runs = []

@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import __version__
 from ..cloud import PointCloud
-from ..errors import LidarfxError
+from ..errors import LidarfxError, LidarfxWarning
 from .classes import DEFAULT_IGNORE, ClassMap
 from .pipeline import (
     DEFAULT_HAG_CAP,
@@ -33,7 +33,10 @@ from .pipeline import (
     feature_list,
     make_classifier,
     make_imputer,
+    point_density,
+    pulse_thinning_mask,
     terrain_shear,
+    unit_to_metre,
     usable_mask,
 )
 
@@ -70,6 +73,17 @@ TRUSTED_TYPES: tuple[str, ...] = (
 
 DEFAULT_MAX_PER_CLASS = 20_000
 
+#: prediction warns when a cloud has less than this share of the sparsest training file's
+#: density: on the IGN training tiles (leave one tile out) OA fell by 0.01 at half the
+#: density and by 0.03 at a quarter (docs/classification.md §10)
+DENSITY_WARN_RATIO = 0.5
+
+
+def cloud_density(cloud: PointCloud) -> float:
+    """Points per m² (all returns, over the occupied 2 m squares; coordinates in metres)."""
+    u = unit_to_metre(cloud)
+    return point_density(cloud.xyz if u == 1.0 else cloud.xyz * u)
+
 
 # --------------------------------------------------------------------------- configuration
 @dataclass
@@ -86,6 +100,7 @@ class TrainConfig:
     hag_cap: float | None = DEFAULT_HAG_CAP
     max_disc_points: float | None = DEFAULT_MAX_DISC_POINTS
     terrain_augment: int = 1
+    density_augment: list[float] | None = None
     precomputed: bool = False
     classifier: str = "hgb"
     n_estimators: int | None = None
@@ -113,6 +128,13 @@ class TrainConfig:
         self.terrain_augment = int(self.terrain_augment or 0)
         if self.terrain_augment < 0:
             raise LidarfxError("terrain_augment must be >= 0")
+        if self.density_augment:
+            self.density_augment = [float(f) for f in self.density_augment]
+            if not all(0.0 < f < 1.0 for f in self.density_augment):
+                raise LidarfxError(f"density_augment takes fractions between 0 and 1 (exclusive), "
+                                   f"got {self.density_augment}")
+        else:
+            self.density_augment = None
         if self.max_per_class is not None and int(self.max_per_class) < 1:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
         make_classifier(self.classifier)  # validates the kind
@@ -196,12 +218,26 @@ def read_sources(sources: Any, progress: bool | None = False) -> list[Source]:
         else:
             cloud, name = io.read(s, progress=progress), str(s)
         mask = usable_mask(cloud)
+        warn_unusable(cloud, mask, name)
         sub = cloud if mask.all() else cloud.subset(mask)
         sub.meta = {**sub.meta, "name": name}
         out.append(Source(name, sub, mask, len(cloud)))
     if not out:
         raise LidarfxError("no input clouds")
     return out
+
+
+def warn_unusable(cloud: PointCloud, mask: np.ndarray, name: str) -> None:
+    """Warn when most points are left out (withheld / synthetic flag, return number 0):
+    they are neither neighbours, training points nor predicted, which is right for IGN's
+    virtual points but surprising when a file sets those flags on real points."""
+    n, bad = len(mask), int((~mask).sum())
+    if n and bad > n // 2:
+        why = [f"{f} {int((np.asarray(cloud[f]) != 0).sum()):,}" for f in ("withheld", "synthetic") if f in cloud]
+        if "return_number" in cloud:
+            why.append(f"return number 0: {int((np.asarray(cloud['return_number']) == 0).sum()):,}")
+        warnings.warn(f"{name}: {bad:,} of {n:,} points are not used (flags: {', '.join(why)}); "
+                      "they are neither training points nor classified", LidarfxWarning, stacklevel=3)
 
 
 def _labels(src: Source, classes: ClassMap) -> np.ndarray:
@@ -277,6 +313,37 @@ class ClassifierModel:
         """Refuse a cloud the model cannot classify (missing fields or precomputed features)."""
         self.features.check_cloud(cloud, name or str(cloud.meta.get("source") or "the cloud"))
 
+    @property
+    def training_density(self) -> float | None:
+        """Points per m² of the sparsest training file (None for models that did not record it)."""
+        d = self.meta.get("training", {}).get("density")
+        return float(d) if d else None
+
+    def density_check(self, cloud: PointCloud, name: str | None = None, warn: bool = True
+                      ) -> dict[str, Any] | None:
+        """Compare the density of ``cloud`` (usable points) with the training files'.
+
+        Returns ``{"density", "training_density", "ratio"}`` (points per m²), or None when
+        the model did not record a density or the cloud is empty.  With ``warn`` a
+        :class:`~lidarfx.errors.LidarfxWarning` is issued when the ratio is below
+        :data:`DENSITY_WARN_RATIO`: the neighbourhoods then hold fewer points than in
+        training and the features, hence the classes, change.  Denser clouds are
+        thinned to the training density by the features themselves.
+        """
+        ref = self.training_density
+        usable = usable_mask(cloud)
+        if ref is None or not usable.any():
+            return None
+        d = cloud_density(cloud if usable.all() else cloud.subset(usable))
+        info = {"density": round(d, 2), "training_density": round(ref, 2), "ratio": round(d / ref, 3)}
+        if warn and d < DENSITY_WARN_RATIO * ref:
+            label = name or str(cloud.meta.get("source") or cloud.meta.get("name") or "the cloud")
+            warnings.warn(
+                f"{label}: {d:.1f} points/m² is {d / ref:.0%} of the sparsest training file's {ref:.1f}; "
+                "the model's neighbourhoods were learned on denser data and accuracy falls with density "
+                "(train on data like this, or with --density-augment)", LidarfxWarning, stacklevel=2)
+        return info
+
     def feature_matrix(self, cloud: PointCloud, index: np.ndarray | None = None, chunk: int = 1_000_000,
                        progress: bool | None = False) -> np.ndarray:
         """Features of ``cloud`` (rows ``index``, default all) as the model computes them."""
@@ -290,17 +357,25 @@ class ClassifierModel:
                   for a in range(0, len(idx), chunk)] or [np.empty((0, len(names)), np.float32)]
         return np.vstack(blocks) if len(blocks) > 1 else blocks[0]
 
-    def predict_proba(self, cloud: PointCloud, *, progress: bool | None = False) -> tuple[np.ndarray, np.ndarray]:
-        """``(proba, usable)``: class probabilities (n_usable × k) of the usable points and the mask."""
+    def predict_proba(self, cloud: PointCloud, *, progress: bool | None = False, check_density: bool = True
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """``(proba, usable)``: class probabilities (n_usable × k) of the usable points and the mask
+        (``check_density``: as in :meth:`predict`)."""
+        if check_density:
+            self.density_check(cloud)
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
         X = self.feature_matrix(sub, progress=progress)
         return self._proba_matrix(X), usable
 
-    def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False):
+    def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False,
+                check_density: bool = True):
         """Output class code of every point (int16); −1 where not predicted (virtual /
         withheld / synthetic points).  With ``return_confidence`` also the highest
-        class probability (float32, NaN where not predicted)."""
+        class probability (float32, NaN where not predicted).  ``check_density``:
+        warn when the cloud is much sparser than the training data (:meth:`density_check`)."""
+        if check_density:
+            self.density_check(cloud)
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
         X = self.feature_matrix(sub, progress=progress)
@@ -319,7 +394,9 @@ class ClassifierModel:
         """A copy of ``cloud`` with ``classification`` set to the predicted codes (points
         not predicted keep their class, or get 1 = unclassified); optionally a
         float32 ``confidence`` attribute (highest class probability)."""
-        res = self.predict(cloud, progress=progress, return_confidence=confidence)
+        warn_unusable(cloud, usable_mask(cloud), str(cloud.meta.get("source") or cloud.meta.get("name") or "the cloud"))
+        dens = self.density_check(cloud)
+        res = self.predict(cloud, progress=progress, return_confidence=confidence, check_density=False)
         codes, conf = res if confidence else (res, None)
         out = cloud.copy() if hasattr(cloud, "copy") else PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
         old = out.get("classification")
@@ -328,7 +405,8 @@ class ClassifierModel:
         if conf is not None:
             out["confidence"] = conf
         out.meta = {**out.meta, "classify": {"model_classes": self.classes.spec(),
-                                             "predicted_points": int((codes >= 0).sum())}}
+                                             "predicted_points": int((codes >= 0).sum()),
+                                             "density": dens}}
         return out
 
     # ------------------------------------------------------------------ persistence
@@ -491,6 +569,23 @@ def sheared_sources(srcs: list[Source], cfg: TrainConfig) -> list[list[Source]]:
     return out
 
 
+def thinned_sources(srcs: list[Source], cfg: TrainConfig) -> list[list[tuple[Source, np.ndarray]]]:
+    """For each fraction of ``cfg.density_augment``: thinned copies of the sources (whole pulses
+    kept with that probability, :func:`~lidarfx.classify.pipeline.pulse_thinning_mask`) and
+    their masks over the source points; seeded by ``cfg.seed``.  Training augmentation for
+    models that must classify sparser clouds than the training files."""
+    out = []
+    for b, f in enumerate(cfg.density_augment or []):
+        copies = []
+        for i, s in enumerate(srcs):
+            m = pulse_thinning_mask(s.cloud, f, seed=cfg.seed * 7919 + 1009 + 31 * b + i)
+            c = s.cloud.subset(m)
+            c.meta = {**c.meta, "name": f"{s.name} (thinned to {f:g})"}
+            copies.append((Source(c.meta["name"], c, s.usable, s.n_total), m))
+        out.append(copies)
+    return out
+
+
 def labelled_sample(sources: list[Source], classes: ClassMap, max_per_class: int | None, seed: int
                     ) -> tuple[list[CloudSample], np.ndarray, dict[str, Any]]:
     """Balanced training sample over all sources: (samples, y, per-class counts)."""
@@ -565,10 +660,20 @@ def train(
         for name, v in c2["used"].items():
             counts["used"][name] += v
         counts.setdefault("terrain_augment", []).append(c2["used"])
+    for b, copies in enumerate(thinned_sources(srcs, cfg)):
+        s3, y3, c3 = labelled_sample([c for c, _ in copies], cmap, _aug_cap(cfg),
+                                     cfg.seed + 1 + cfg.terrain_augment + b)  # the seeds evaluate uses
+        X = np.vstack([X, tr.transform(s3)])
+        y = np.concatenate([y, y3])
+        for name, v in c3["used"].items():
+            counts["used"][name] += v
+        counts.setdefault("density_augment", []).append(c3["used"])
     t2 = time.perf_counter()
     say(f"features: {X.shape[1]} columns of {len(y):,} points in {t2 - t1:.1f} s"
         + (f" (incl. {cfg.terrain_augment} terrain-sheared cop{'y' if cfg.terrain_augment == 1 else 'ies'})"
-           if cfg.terrain_augment else ""))
+           if cfg.terrain_augment else "")
+        + (f" (incl. copies thinned to {', '.join(f'{f:g}' for f in cfg.density_augment)} of the density)"
+           if cfg.density_augment else ""))
     tail = cfg.fit_matrix(X, y)
     t3 = time.perf_counter()
     say(f"fit {cfg.classifier}: {t3 - t2:.1f} s")
@@ -582,7 +687,9 @@ def train(
         "classes": cmap.to_dict(),
         "class_spec": cmap.spec(),
         "training": {
-            "files": [{"name": s.name, "points": s.n_total, "usable": len(s.cloud)} for s in srcs],
+            "files": [{"name": s.name, "points": s.n_total, "usable": len(s.cloud),
+                       "density": round(cloud_density(s.cloud), 2)} for s in srcs],
+            "density": round(min(cloud_density(s.cloud) for s in srcs), 2),
             "counts": counts,
             "seconds": {"read": round(t1 - t0, 3), "features": round(t2 - t1, 3), "fit": round(t3 - t2, 3)},
         },

@@ -472,6 +472,20 @@ def thinning_mask(xyz: np.ndarray, max_density: float | None, seed: int = 0) -> 
     return np.random.default_rng(seed).random(len(xyz)) < (max_density / d)
 
 
+def pulse_thinning_mask(cloud: PointCloud, fraction: float, seed: int = 0) -> np.ndarray:
+    """Keep each laser pulse with probability ``fraction`` (bool mask over the points).
+
+    A pulse is the set of points with the same ``gps_time`` (all its returns are
+    kept or dropped together, as in a survey flown with fewer pulses); without
+    GPS times every point is its own pulse.
+    """
+    rng = np.random.default_rng(seed)
+    if "gps_time" in cloud and len(cloud):
+        _, pulse = np.unique(np.asarray(cloud["gps_time"]), return_inverse=True)
+        return (rng.random(int(pulse.max()) + 1) < fraction)[pulse.ravel()]
+    return rng.random(len(cloud)) < fraction
+
+
 def terrain_shear(cloud: PointCloud, seed: int = 0) -> PointCloud:
     """A copy with z + f(x, y), f a smooth random terrain (training augmentation).
 

@@ -8,8 +8,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
-from ..errors import EXIT_USAGE, LidarfxError
+from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
 COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify"]
 
@@ -52,6 +53,15 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE
+    _default_show = warnings.showwarning
+
+    def _show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, LidarfxWarning):  # one line, no source location
+            print(f"lidarfx: warning: {message}", file=sys.stderr)
+        else:
+            _default_show(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = _show
     try:
         rc = args.func(args)
     except LidarfxError as exc:
@@ -69,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    finally:
+        warnings.showwarning = _default_show
     return int(rc or 0)
 
 

@@ -35,13 +35,17 @@ copy of the training files, class-balanced.  Metrics: OA, kappa, per class PA
 (producer's accuracy = recall), UA (user's accuracy = precision), F1, IoU,
 support; confusion matrix rows = reference, columns = predicted.
 Virtual points (return number 0), withheld and synthetic points are neither
-neighbours nor classified.  See docs/classification.md.
+neighbours nor classified.  Prediction warns when a cloud has less than half
+the density of the sparsest training file (--density-augment trains for
+sparser clouds).  See docs/classification.md.
 """
 
 TRAIN_EPILOG = """examples:
   lidarfx classify train a.laz b.laz --model m.skops --classes 2,3+4+5,6
   lidarfx classify train a.laz --model m.skops --classes ground=2,vegetation=3+4+5:5,building=6 \\
       --classifier rf --features eigen,height -r 0.5 -r 1 --max-per-class 50000
+  # a model for clouds sparser than the training files (copies with 1/2, 1/4, 1/8 of the pulses)
+  lidarfx classify train a.laz b.laz --model m.skops --classes 2,3+4+5,6 --density-augment 0.5,0.25,0.125
 """
 
 PREDICT_EPILOG = """examples:
@@ -83,6 +87,9 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--terrain-augment", type=int, default=1,
                    help="terrain-sheared copies of the training files added to the training sample "
                         "(0 = none), default %(default)s")
+    g.add_argument("--density-augment", default=None, metavar="F[,F...]",
+                   help="add copies of the training files thinned to these fractions of their pulses "
+                        "(e.g. 0.5,0.25,0.125) for models that will classify sparser clouds; default none")
     g.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere")
     g.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn")
     g.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z (TLS normals)")
@@ -92,6 +99,20 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier")
     g.add_argument("--jobs", type=int, default=None,
                    help="threads of the classifier fit (rf: all cores; hgb: 1 by default, see docs)")
+
+
+def _fractions(text: str | None) -> list[float] | None:
+    from ..errors import LidarfxError
+
+    if text is None:
+        return None
+    try:
+        vals = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise LidarfxError(f"--density-augment takes comma-separated fractions like 0.5,0.25, got {text!r}") from None
+    if not vals or not all(0.0 < v < 1.0 for v in vals):
+        raise LidarfxError(f"--density-augment fractions must be between 0 and 1 (exclusive), got {text!r}")
+    return vals
 
 
 def register(sub) -> None:
@@ -178,6 +199,7 @@ def _config(args):
         hag_cap=args.hag_cap or None,
         max_disc_points=args.max_disc_points or None,
         terrain_augment=args.terrain_augment,
+        density_augment=_fractions(args.density_augment),
         precomputed=args.precomputed,
         classifier=args.classifier,
         n_estimators=args.n_estimators,
@@ -244,6 +266,7 @@ def run_predict(args) -> int:
     counts = {int(c): int(n) for c, n in zip(*np.unique(cls, return_counts=True))}
     summary = {"input": args.input, "output": args.output, "model": args.model, "points": len(out),
                "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
+               "density": out.meta["classify"].get("density"),
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
