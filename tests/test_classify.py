@@ -622,6 +622,25 @@ def test_density_warning_cli(facade_files, tmp_path, capsys):
     assert "warning" not in capsys.readouterr().err
 
 
+def test_cli_model_info(facade_files, tmp_path, capsys):
+    d, pa, _ = facade_files
+    model = tmp_path / "m.skops"
+    assert main(["classify", "train", str(pa), "--model", str(model), *CLI_MODEL]) == 0
+    capsys.readouterr()
+    assert main(["classify", "info", str(model), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["classifier"] == "rf" and info["trees"] == 20
+    assert [c["name"] for c in info["classes"]] == ["ground", "vegetation", "wall", "roof", "window", "clutter"]
+    assert info["classes"][0]["codes"] == [2] and len(info["features"]) == 52 and info["radii"] == [0.3, 0.5]
+    assert info["training_density"] == pytest.approx(info["training_files"][0]["density"])
+    assert info["training_density"] > 50  # the dense synthetic facade
+    assert sum(info["training_counts"].values()) > 6000
+    assert main(["info", str(model)]) == 0  # the general info command shows models too
+    out = " ".join(capsys.readouterr().out.split())  # rich wraps long lines
+    assert "classifier (rf)" in out and "training density" in out and "wall codes 6" in out
+    assert main(["classify", "info", str(tmp_path / "none.skops")]) == 2
+
+
 def test_cli_help_has_examples(capsys):
     with pytest.raises(SystemExit):
         main(["classify", "--help"])

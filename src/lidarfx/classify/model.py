@@ -308,6 +308,33 @@ class ClassifierModel:
         return (f"ClassifierModel({self.meta['config']['classifier']}, classes={self.classes.spec()!r}, "
                 f"{len(self.feature_names)} features, radii={self.radii})")
 
+    def summary(self) -> dict[str, Any]:
+        """What the model is, from its metadata: classes, features, radii, training data, versions."""
+        clf = self.pipeline.named_steps["classifier"]
+        size = {}
+        if hasattr(clf, "n_iter_"):
+            size = {"boosting_iterations": int(clf.n_iter_),
+                    "trees": int(clf.n_iter_) * (1 if len(self.classes) == 2 else len(self.classes))}
+        elif hasattr(clf, "estimators_"):
+            size = {"trees": len(clf.estimators_)}
+        tr = self.meta.get("training", {})
+        return {
+            "classifier": self.meta["config"]["classifier"], **size,
+            "classes": [{"name": n, "codes": list(g), "output_code": int(c)}
+                        for n, g, c in zip(self.classes.names, self.classes.groups, self.classes.codes)],
+            "class_spec": self.classes.spec(),
+            "features": self.feature_names,
+            "radii": self.radii,
+            "config": self.meta["config"],
+            "training_files": tr.get("files", []),
+            "training_density": self.training_density,
+            "training_counts": tr.get("counts", {}).get("used", {}),
+            "training_seconds": tr.get("seconds", {}),
+            "lidarfx_version": self.meta.get("lidarfx_version"),
+            "sklearn_version": self.meta.get("sklearn_version"),
+            "created": self.meta.get("created"),
+        }
+
     # ------------------------------------------------------------------ prediction
     def check(self, cloud: PointCloud, name: str | None = None) -> None:
         """Refuse a cloud the model cannot classify (missing fields or precomputed features)."""

@@ -17,8 +17,9 @@ EPILOG = """examples:
   lidarfx classify evaluate tile*.laz --classes 2,3+4+5,6 --cv 3 --spatial-blocks 20 --out eval
   # leave one tile out, and train on the tiles / test on other files
   lidarfx classify evaluate tile*.laz --classes 2,3+4+5,6 --leave-one-out --test other1.laz other2.laz
-  # a trained model on labelled files
+  # a trained model on labelled files; what a model file holds
   lidarfx classify evaluate other1.laz other2.laz --model als.skops --out eval_test
+  lidarfx classify info als.skops
   # Lang (seed 001): random forest vs naive Bayes on a TLS facade, multi-scale 0.1/0.3/0.5 m
   lidarfx synth facade facade.laz --seed 1
   #   (TLS: no thinning, no terrain augmentation, normals towards the scanner)
@@ -148,6 +149,15 @@ def register(sub) -> None:
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
+    i = cs.add_parser("info", help="show what a model file holds (classes, features, training data)",
+                      description="Show a model file's classes, features, radii, training files and their "
+                                  "densities, sample counts and versions (loaded safely, nothing is executed).",
+                      epilog="examples:\n  lidarfx classify info als.skops\n  lidarfx classify info als.skops --json\n",
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    i.add_argument("model", help="model file written by 'lidarfx classify train'")
+    i.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    i.set_defaults(func=run_info)
+
     e = cs.add_parser("evaluate", help="cross-validate / test a model configuration", epilog=EPILOG,
                       description="Evaluate: M-fold CV with random and spatial-block folds, leave-one-file-out, "
                                   "train-on-A/test-on-B, or a trained model (--model) on labelled files.",
@@ -274,6 +284,47 @@ def run_predict(args) -> int:
     say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "
         + ", ".join(f"class {c} {n:,}" for c, n in counts.items()) + f" ({t3 - t0:.1f} s)")
     return 0
+
+
+def run_info(args) -> int:
+    from ..classify import load_model
+
+    summary = {"model": str(args.model), **load_model(args.model).summary()}
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2)
+        print()
+        return 0
+    from rich.console import Console
+
+    Console().print(model_table(summary))
+    return 0
+
+
+def model_table(m: dict):
+    """A rich table of :meth:`ClassifierModel.summary` (also used by ``lidarfx info``)."""
+    from rich.table import Table
+
+    t = Table(title=f"{m['model']}  —  lidarfx classifier ({m['classifier']})", show_header=False,
+              title_justify="left")
+    t.add_column(style="bold")
+    t.add_column()
+    size = ", ".join(f"{v:,} {k.replace('_', ' ')}" for k, v in m.items() if k in ("boosting_iterations", "trees"))
+    t.add_row("classifier", m["classifier"] + (f" ({size})" if size else ""))
+    t.add_row("classes", "\n".join(f"{c['name']:<14} codes {'+'.join(map(str, c['codes'])):<10} -> {c['output_code']}"
+                                   for c in m["classes"]))
+    t.add_row("features", f"{len(m['features'])} columns; radii {', '.join(f'{r:g}' for r in m['radii'])} m")
+    cfg = m["config"]
+    t.add_row("settings", f"ground {cfg['ground']}, HAG cap {cfg['hag_cap']}, max disc points "
+                          f"{cfg['max_disc_points']}, terrain augment {cfg['terrain_augment']}, density augment "
+                          f"{cfg.get('density_augment')}, max per class {cfg['max_per_class']}, seed {cfg['seed']}")
+    files = [f"{f['name']}  {f['points']:,} points" + (f", {f['density']:.1f} pts/m²" if f.get("density") else "")
+             for f in m["training_files"]]
+    t.add_row("training files", "\n".join(files) or "n/a")
+    if m["training_density"]:
+        t.add_row("training density", f"{m['training_density']:.1f} pts/m² (sparsest file; prediction warns below half)")
+    t.add_row("training sample", ", ".join(f"{k} {v:,}" for k, v in m["training_counts"].items()) or "n/a")
+    t.add_row("versions", f"lidarfx {m['lidarfx_version']}, scikit-learn {m['sklearn_version']}, created {m['created']}")
+    return t
 
 
 def run_evaluate(args) -> int:

@@ -8,6 +8,7 @@ from typing import Any
 EPILOG = """examples:
   lidarfx info scan.laz                  # a table per file
   lidarfx info a.laz b.las --json        # JSON: one object per file (a list for several)
+  lidarfx info als.skops                 # a classifier model file (as: lidarfx classify info)
 
 density: points per m² = n / number of occupied 1 m x 1 m cells (plan view), and
 n / xy bounding-box area; feet-based CRSs are converted to metres.
@@ -33,6 +34,14 @@ def run(args: argparse.Namespace) -> int:
     """Print the summary of every file; returns the exit code."""
     from ..io import info
 
+    if any(str(f).lower().endswith(".skops") for f in args.files):  # a classifier model file
+        from .classify import run_info
+
+        if len(args.files) > 1:
+            from ..errors import LidarfxError
+
+            raise LidarfxError("give one model file at a time (or use: lidarfx classify info MODEL)")
+        return run_info(argparse.Namespace(model=args.files[0], json=args.json))
     results = [info(f) for f in args.files]
     if args.json:
         print(json.dumps(results[0] if len(results) == 1 else results, indent=2))
