@@ -450,7 +450,9 @@ def format_report(report: dict[str, Any]) -> str:
                        f"mean F1 {_f(pf['mean_f1'])}")
         if key == "test":
             for name, m in sec["files"].items():
-                out.append(format_metrics(m, f"-- {Path(name).name}"))
+                d = m.get("density")
+                dens = (f" ({d['density']:.1f} pts/m², {d['ratio']:.2f} × the training density)" if d else "")
+                out.append(format_metrics(m, f"-- {Path(name).name}{dens}"))
             out.append(format_metrics(sec["metrics"], "-- all test files pooled"))
         else:
             out.append(format_metrics(sec["metrics"]))
