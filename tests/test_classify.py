@@ -560,6 +560,8 @@ def test_pulse_thinning_keeps_whole_pulses():
     assert np.array_equal(m, pulse_thinning_mask(c, 0.25, seed=1))  # seeded
     bare = lidarfx.PointCloud(c.xyz)  # no GPS time: points
     assert pulse_thinning_mask(bare, 0.5, seed=0).mean() == pytest.approx(0.5, abs=0.02)
+    zero = lidarfx.PointCloud(c.xyz, {"gps_time": np.zeros(len(c))})  # times that are not pulse stamps
+    assert pulse_thinning_mask(zero, 0.5, seed=0).mean() == pytest.approx(0.5, abs=0.02)
 
 
 def test_density_augment_train_and_cv(facades):

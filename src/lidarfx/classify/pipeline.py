@@ -476,13 +476,18 @@ def pulse_thinning_mask(cloud: PointCloud, fraction: float, seed: int = 0) -> np
     """Keep each laser pulse with probability ``fraction`` (bool mask over the points).
 
     A pulse is the set of points with the same ``gps_time`` (all its returns are
-    kept or dropped together, as in a survey flown with fewer pulses); without
-    GPS times every point is its own pulse.
+    kept or dropped together, as in a survey flown with fewer pulses).  Without
+    GPS times, or when they cannot be pulse stamps (fewer distinct times than
+    one per 15 points, the most returns a LAS pulse can have — e.g. all zero),
+    every point is its own pulse.
     """
     rng = np.random.default_rng(seed)
     if "gps_time" in cloud and len(cloud):
         _, pulse = np.unique(np.asarray(cloud["gps_time"]), return_inverse=True)
-        return (rng.random(int(pulse.max()) + 1) < fraction)[pulse.ravel()]
+        pulse = pulse.ravel()
+        n_pulses = int(pulse.max()) + 1
+        if n_pulses * 15 >= len(cloud):
+            return (rng.random(n_pulses) < fraction)[pulse]
     return rng.random(len(cloud)) < fraction
 
 
