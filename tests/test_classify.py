@@ -605,6 +605,21 @@ def test_mostly_unusable_points_warn(facades, rf_model):
     assert out.meta["classify"]["predicted_points"] == len(b) - int(flag.sum())
 
 
+def test_evaluate_model_without_model_classes(facades, rf_model):
+    from lidarfx.classify import evaluate_model
+    from lidarfx.errors import LidarfxWarning
+
+    b = facades[1]
+    other = b.copy()
+    other["classification"] = np.zeros(len(b), np.uint8)
+    other.meta = {**other.meta, "name": "unlabelled"}
+    with pytest.raises(LidarfxError, match=r"no points of the model's classes .*its classes: \[0\]"):
+        evaluate_model(rf_model, [other])
+    with pytest.warns(LidarfxWarning, match="not counted"):
+        sec = evaluate_model(rf_model, [other, b])
+    assert len(sec["files"]) == 1 and sec["metrics"]["oa"] > 0.9
+
+
 def test_density_warning_cli(facade_files, tmp_path, capsys):
     d, pa, pb = facade_files
     model = tmp_path / "m.skops"

@@ -19,13 +19,14 @@ import json
 import math
 import os
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
 from .. import __version__
-from ..errors import LidarfxError
+from ..errors import LidarfxError, LidarfxWarning
 from .classes import ClassMap
 from .model import (
     ClassifierModel,
@@ -254,6 +255,14 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     for s in srcs:
         t = time.perf_counter()
         y = _labels(s, cmap)
+        if not (y >= 0).any():
+            found = sorted(int(c) for c in np.unique(np.asarray(s.cloud["classification"])))
+            msg = (f"{s.name} has no points of the model's classes ({cmap.spec()}); its classes: "
+                   f"{found[:20]}{' …' if len(found) > 20 else ''}")
+            if len(srcs) == 1:
+                raise LidarfxError(msg)
+            warnings.warn(msg + "; not counted", LidarfxWarning, stacklevel=2)
+            continue
         dens = model.density_check(s.cloud, s.name)
         codes = model.predict(s.cloud, progress=progress, check_density=False)
         pred = cmap.index_of(np.clip(codes, 0, 255))
@@ -268,6 +277,8 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         if log:
             log(f"  {Path(s.name).name}: {m['points']:,} points, OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f} "
                 f"({m['seconds']:.1f} s)")
+    if not files:
+        raise LidarfxError(f"none of the files has points of the model's classes ({cmap.spec()})")
     pooled = _metrics_for(total, cmap)
     return {"title": "trained model on test files", "files": files, "metrics": pooled,
             "seconds": round(time.perf_counter() - t0, 3)}
