@@ -620,6 +620,29 @@ def test_evaluate_model_without_model_classes(facades, rf_model):
     assert len(sec["files"]) == 1 and sec["metrics"]["oa"] > 0.9
 
 
+def test_predict_with_the_files_ground_class(facade_files, tmp_path, capsys):
+    d, pa, pb = facade_files
+    model = tmp_path / "m.skops"
+    assert main(["classify", "train", str(pa), "--model", str(model), "--classes", FACADE6, "--features",
+                 "eigen,height_above_ground", "-r", "0.5", "--classifier", "rf", "--n-estimators", "10",
+                 "--max-per-class", "1000", "-q"]) == 0
+    m = load_model(model)
+    b = lidarfx.read(pb)
+    m.features.ground = "class"  # what predict --ground class does
+    hag = m.feature_matrix(b)[:, m.feature_names.index("height_above_ground")]
+    assert np.all(hag[np.asarray(b["classification"]) == 2] == 0)  # class-2 points are the ground surface
+    capsys.readouterr()
+    assert main(["classify", "predict", str(pb), str(tmp_path / "o.laz"), "--model", str(model),
+                 "--ground", "class", "--json", "-q"]) == 0
+    assert json.loads(capsys.readouterr().out)["ground"] == "class"
+    nog = b.copy()
+    nog["classification"] = np.where(nog["classification"] == 2, 1, nog["classification"]).astype(np.uint8)
+    lidarfx.write(nog, tmp_path / "noground.laz")
+    assert main(["classify", "predict", str(tmp_path / "noground.laz"), str(tmp_path / "o2.laz"), "--model",
+                 str(model), "--ground", "class", "-q"]) == 2
+    assert "no ground found" in capsys.readouterr().err and not (tmp_path / "o2.laz").exists()
+
+
 def test_density_warning_cli(facade_files, tmp_path, capsys):
     d, pa, pb = facade_files
     model = tmp_path / "m.skops"

@@ -52,6 +52,7 @@ TRAIN_EPILOG = """examples:
 PREDICT_EPILOG = """examples:
   lidarfx classify predict new.laz out.laz --model m.skops
   lidarfx classify predict new_fx.laz out.laz --model m.skops --precomputed   # features already in the file
+  lidarfx classify predict delivered.laz out.laz --model m.skops --ground class   # the file's class 2 is the ground
 """
 
 
@@ -146,6 +147,9 @@ def register(sub) -> None:
     pr.add_argument("--confidence", action="store_true", help="add a float32 'confidence' attribute (top probability)")
     pr.add_argument("--precomputed", action="store_true",
                     help="read the neighbourhood features from the input's attributes")
+    pr.add_argument("--ground", choices=["smrf", "class"], default=None,
+                    help="ground surface for height_above_ground: 'class' = the input's class 2 (e.g. the data "
+                         "provider's ground classification) instead of the SMRF filter; default: the model's")
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
@@ -265,6 +269,8 @@ def run_predict(args) -> int:
     model = load_model(args.model)
     if args.precomputed:
         model.features.precomputed = True
+    if args.ground:
+        model.features.ground = args.ground
     cloud = io.read(args.input, progress=False if args.quiet else None)
     model.check(cloud, args.input)
     t1 = time.perf_counter()
@@ -276,7 +282,7 @@ def run_predict(args) -> int:
     counts = {int(c): int(n) for c, n in zip(*np.unique(cls, return_counts=True))}
     summary = {"input": args.input, "output": args.output, "model": args.model, "points": len(out),
                "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
-               "density": out.meta["classify"].get("density"),
+               "density": out.meta["classify"].get("density"), "ground": model.features.ground,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
