@@ -555,10 +555,10 @@ def load_model(path: str | os.PathLike) -> ClassifierModel:
     meta = obj["meta"]
     if obj.get("lidarfx_version") != __version__:
         warnings.warn(f"{p} was written by lidarfx {obj.get('lidarfx_version')}, this is {__version__}; "
-                      "features may differ", stacklevel=2)
+                      "features may differ", LidarfxWarning, stacklevel=2)
     if obj.get("sklearn_version") != _sklearn_version():
         warnings.warn(f"{p} was written with scikit-learn {obj.get('sklearn_version')}, this is "
-                      f"{_sklearn_version()}", stacklevel=2)
+                      f"{_sklearn_version()}", LidarfxWarning, stacklevel=2)
     try:
         config = TrainConfig(**meta["config"])
         names = config.feature_names()
