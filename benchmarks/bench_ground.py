@@ -6,6 +6,7 @@ Run by hand (not collected by pytest)::
     PYTHONPATH=src python benchmarks/bench_ground.py                  # errors with the defaults
     PYTHONPATH=src python benchmarks/bench_ground.py --timings        # + speed on other real tiles
     PYTHONPATH=src python benchmarks/bench_ground.py --tuning         # the tuning grid + leave-one-out
+    PYTHONPATH=src python benchmarks/bench_ground.py --steep          # dense tiles made steep
     PYTHONPATH=src python benchmarks/bench_ground.py --json out.json  # also save every number
 
 What it does:
@@ -23,6 +24,12 @@ What it does:
    (docs/ground.md): mean total error of every set, the best set, and the
    leave-one-out figure (for each sample, the set that is best on the other 7
    samples, scored on the held-out one).  One process; a few minutes.
+5. ``--steep``: dense ALS on steep terrain.  The three labelled IGN tiles
+   (30 pts/m², flat) as they are and as three terrain-sheared copies each
+   (:func:`lidarfx.classify.pipeline.terrain_shear`, seeds 100-102: z + a smooth
+   random surface with slopes up to about 45°, labels unchanged); reference ground
+   = class 2, object = classes 3-6.  Errors of a small grid of opening slopes,
+   cells and scalars (docs/ground.md §9).
 """
 from __future__ import annotations
 
@@ -38,6 +45,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parents[1] / "shared" / "data" / "real"
 SAMPLES = ["samp11", "samp21", "samp23", "samp31", "samp41", "samp51", "samp53", "samp61"]
+IGN_TILES = [f"test_data_{t}_627755_LA93_IGN69.laz" for t in (77050, 77055, 77060)]
+STEEP_GRID = {"slope": [0.2, 0.3, 0.4, 0.5], "cell": [1.0, 1.5], "scalar": [1.0, 1.5]}
 TIMING_FILES = [
     "test_data_77050_627755_LA93_IGN69.laz",
     "autzen_trim.laz",
@@ -133,6 +142,39 @@ def tuning(samples):
     }
 
 
+def steep(data: Path):
+    """Errors on the IGN tiles, flat and terrain-sheared, for the STEEP_GRID sets."""
+    import lidarfx
+    from lidarfx.classify.pipeline import terrain_shear
+    from lidarfx.ground import classify_ground, ground_errors
+
+    clouds = []
+    for name in IGN_TILES:
+        f = data / name
+        if not f.exists():
+            sys.exit(f"missing {f}")
+        c = lidarfx.read(f)
+        cls = np.asarray(c["classification"])
+        keep = np.isin(cls, [2, 3, 4, 5, 6])
+        for seed in (None, 100, 101, 102):
+            cc = c if seed is None else terrain_shear(c, seed=seed)
+            bare = lidarfx.PointCloud(cc.xyz, {k: c[k] for k in ("return_number", "number_of_returns")})
+            clouds.append((seed is not None, bare, cls == 2, keep))
+    out = []
+    print(f"{'slope':>5s} {'cell':>4s} {'scalar':>6s}   flat: I % / II % / total %   sheared: I % / II % / total %")
+    for slope, cell, scalar in itertools.product(STEEP_GRID["slope"], STEEP_GRID["cell"], STEEP_GRID["scalar"]):
+        p = {"slope": slope, "cell": cell, "scalar": scalar}
+        errs = {False: [], True: []}
+        for sheared, bare, ref, keep in clouds:
+            e = ground_errors(classify_ground(bare, **p)[keep], ref[keep])
+            errs[sheared].append([e["type_i"], e["type_ii"], e["total"]])
+        r = {**p, "flat": np.mean(errs[False], axis=0).tolist(), "sheared": np.mean(errs[True], axis=0).tolist()}
+        out.append(r)
+        print(f"{slope:5.2f} {cell:4.1f} {scalar:6.2f}   " + "  ".join(
+            " / ".join(f"{100 * v:.2f}" for v in r[k]) + "     " for k in ("flat", "sheared")), flush=True)
+    return out
+
+
 def timings(data: Path):
     import lidarfx
     from lidarfx.ground import classify_ground, dtm, height_above_ground
@@ -167,6 +209,7 @@ def main() -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--timings", action="store_true")
     ap.add_argument("--tuning", action="store_true")
+    ap.add_argument("--steep", action="store_true", help="IGN tiles flat and terrain-sheared (docs/ground.md §9)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
 
@@ -188,6 +231,8 @@ def main() -> int:
             print(f"  leave-one-out {r['sample']}: {100 * r['held_out_total']:.2f} %  with {r['chosen']}")
         print(f"leave-one-out mean total {100 * t['leave_one_out']['mean_total']:.2f} %")
         result["tuning"] = t
+    if args.steep:
+        result["steep"] = steep(args.data)
     if args.json:
         args.json.write_text(json.dumps(result, indent=2))
     return 0
