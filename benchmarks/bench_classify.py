@@ -7,6 +7,7 @@ Run by hand (not collected by pytest)::
     python benchmarks/bench_classify.py --json bench.json     # also save every number
     python benchmarks/bench_classify.py --skip-baseline       # lidarfx only (~1–2 min)
     python benchmarks/bench_classify.py --facade              # seed 001 experiment on the synthetic facade
+    python benchmarks/bench_classify.py --loto                # both pipelines, leave one training tile out
 
 The split (issue 5 acceptance): train on the three contiguous IGN LiDAR HD tiles
 ``test_data_77050/77055/77060_627755_LA93_IGN69.laz``; test on ``crop_1.laz`` and
@@ -36,6 +37,11 @@ reference, columns = predicted), seconds of each step, the time ratio and the
 acceptance check (OA ≥ 0.965, mean F1 ≥ 0.95, lidarfx time ≤ 1/3 of the baseline).
 The machine load (1-minute load average) is printed before and after each pipeline:
 the timings are wall-clock and other processes on the same cores change them.
+
+``--loto`` scores both pipelines on the training tiles only: each of the three tiles
+is predicted by a model trained on the other two, and the confusion matrices are
+pooled. This is the split closest to "tiles of the same survey" that the training data
+allows, and it reads no test file.
 """
 from __future__ import annotations
 
@@ -260,6 +266,35 @@ def summarise(name: str, res: dict[str, Any], cmap) -> dict[str, Any]:
     return res
 
 
+def leave_one_tile_out(train_paths, cmap, args, log) -> int:
+    """Both pipelines, each training tile predicted by a model of the other two; pooled."""
+    pooled: dict[str, dict[str, Any]] = {}
+    for held in train_paths:
+        rest = [q for q in train_paths if q != held]
+        log(f"held out: {held.name}")
+        runs = {"lidarfx default (hgb)": lidarfx_default(rest, [held], cmap, args.seed, log)}
+        if not args.skip_baseline:
+            for k, v in baseline(rest, [held], cmap, args.seed, log).items():
+                runs[f"baseline: jakteristics 1/2/3 m {'+ z ' if k == 'with z' else ''}+ balanced RF"
+                     + ("" if k == "with z" else " (no z)")] = v
+        for name, r in runs.items():
+            acc = pooled.setdefault(name, {"confusion": {}, "seconds": {}, "features": r["features"],
+                                           "train_points": 0})
+            acc["confusion"].update(r["confusion"])
+            acc["train_points"] += r["train_points"]
+            for k2, v2 in r["seconds"].items():
+                acc["seconds"][k2] = acc["seconds"].get(k2, 0.0) + v2
+    results = {name: summarise(name + " (leave one tile out)", r, cmap) for name, r in pooled.items()}
+    print("\n=== summary: leave one tile out (training tiles only; seconds summed over the 3 folds) ===")
+    print(f"{'pipeline':<52} {'OA':>7} {'mean F1':>8} {'seconds':>8}")
+    for name, r in results.items():
+        print(f"{name:<52} {r['metrics']['oa']:>7.4f} {r['metrics']['mean_f1']:>8.4f} {r['seconds']['total']:>8.1f}")
+    if args.json:
+        args.json.write_text(json.dumps({"split": "leave one tile out", "train": TRAIN, "classes": CLASSES,
+                                         "results": results}, indent=2, default=float))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", type=Path, default=DATA, help=f"folder of the IGN files (default {DATA})")
@@ -268,6 +303,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--also-rf", action="store_true", help="also run lidarfx's features with a random forest")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--facade", action="store_true", help="run the seed-001 facade experiment instead (~15 min)")
+    p.add_argument("--loto", action="store_true",
+                   help="leave one training tile out instead of the test files (training data only)")
     p.add_argument("--facade-per-class", type=int, default=5000,
                    help="training points per class in the facade experiment (default 5000)")
     args = p.parse_args(argv)
@@ -285,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
 
     train_paths = [args.data / f for f in TRAIN]
     test_paths = [args.data / f for f in TEST]
-    missing = [str(q) for q in train_paths + test_paths if not q.is_file()]
+    missing = [str(q) for q in train_paths + ([] if args.loto else test_paths) if not q.is_file()]
     if missing:
         print(f"missing data files: {', '.join(missing)}", file=sys.stderr)
         return 2
@@ -293,12 +330,14 @@ def main(argv: list[str] | None = None) -> int:
     log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
     print(f"lidarfx {lidarfx.__version__}, scikit-learn {sklearn.__version__}, python {platform.python_version()}, "
           f"{os.cpu_count()} cores")
-    print(f"train: {', '.join(TRAIN)}\ntest:  {', '.join(TEST)}\nclasses: {CLASSES} (others ignored)")
+    print(f"train: {', '.join(TRAIN)}\ntest:  {'leave one tile out' if args.loto else ', '.join(TEST)}\nclasses: {CLASSES} (others ignored)")
     # warm-up (numba compile / cache load), untimed
     from lidarfx.classify import CloudSample, LidarFeatures
 
     warm = read_usable(train_paths[0])
     LidarFeatures().transform(CloudSample(warm, range(0, len(warm), 50)))
+    if args.loto:
+        return leave_one_tile_out(train_paths, cmap, args, log)
     out: dict[str, Any] = {"lidarfx_version": lidarfx.__version__, "sklearn_version": sklearn.__version__,
                            "cores": os.cpu_count(), "train": TRAIN, "test": TEST, "classes": CLASSES}
     runs = [("lidarfx default (hgb)", lambda: lidarfx_default(train_paths, test_paths, cmap, args.seed, log))]
