@@ -481,6 +481,13 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert rep["sections"]["test"]["metrics"]["oa"] > 0.95
     assert (d / "ev" / "confusion_test.png").is_file()
+    fb = rep["sections"]["test"]["files"][str(pb)]
+    assert fb["error_map"] == str(d / "ev" / "errors_b.png") and (d / "ev" / "errors_b.png").is_file()
+    cm = np.array(fb["confusion"])
+    off = cm - np.diag(np.diag(cm))
+    counts = list(fb["error_pairs"].values())
+    assert counts == sorted(counts, reverse=True) and counts[0] == off.max()  # the largest off-diagonal cell first
+    assert sum(counts) == off.sum() if (off > 0).sum() <= 8 else sum(counts) < off.sum()  # at most 8 pairs named
     assert main(["classify", "evaluate", str(pa), "--cv", "2", "--spatial-blocks", "5", *CLI_MODEL]) == 0
     txt = capsys.readouterr().out
     assert "random folds" in txt and "spatial blocks of 5 m" in txt and "OA" in txt

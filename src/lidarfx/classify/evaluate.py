@@ -239,13 +239,27 @@ def _thinned_features(sources: list[Source], copies: list[tuple[Source, np.ndarr
     return np.vstack(Xs), np.concatenate(rows)
 
 
+def _out_dir(out_dir: str | os.PathLike) -> Path:
+    """The report folder, created if missing (an error if it is a file)."""
+    d = Path(out_dir)
+    if d.exists() and not d.is_dir():
+        raise LidarfxError(f"{d} exists and is not a folder")
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
 def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | None = False,
-                   log: Callable[[str], None] | None = None) -> dict[str, Any]:
+                   log: Callable[[str], None] | None = None,
+                   maps_dir: str | os.PathLike | None = None) -> dict[str, Any]:
     """Metrics of a trained model on labelled clouds: per file and pooled.
 
     Every usable point is classified (features use all of them as neighbours);
     only points whose reference class is in the model's class map count.
+    With ``maps_dir``, a plan-view error map ``errors_<file>.png`` of every file
+    is written there (:func:`lidarfx.render.error_map`; its path in the file's
+    ``error_map``, the points of its error pairs in ``error_pairs``).
     """
+    maps = _out_dir(maps_dir) if maps_dir is not None else None
     srcs = read_sources(sources, progress=progress)
     cmap = model.classes
     k = len(cmap)
@@ -273,6 +287,14 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         m["ignored_points"] = int((y < 0).sum())
         m["unusable_points"] = int(s.n_total - len(s.cloud))
         m["density"] = dens
+        if maps is not None:
+            from ..render import error_map
+
+            u = unit_to_metre(s.cloud)
+            png, pairs = error_map(s.cloud.xyz[:, :2] * u, s.cloud.xyz[:, 2] * u, y, np.where(y >= 0, pred, -1),
+                                   [c["name"] for c in m["classes"]], maps / f"errors_{_stem(s.name)}.png",
+                                   title=f"{Path(s.name).name}: OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f}")
+            m["error_map"], m["error_pairs"] = str(png), pairs
         files[s.name] = m
         if log:
             log(f"  {Path(s.name).name}: {m['points']:,} points, OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f} "
@@ -300,6 +322,7 @@ def evaluate(
     cv_seed: int = 0,
     progress: bool | None = False,
     log: Callable[[str], None] | None = None,
+    maps_dir: str | os.PathLike | None = None,
     **params: Any,
 ) -> dict[str, Any]:
     """Evaluate a classifier configuration on labelled clouds; returns a report dict.
@@ -314,7 +337,8 @@ def evaluate(
     * ``leave_one_file_out`` — train on all files but one, test on it (when
       ``leave_one_out`` and ≥ 2 files).
     * ``test`` — train on all ``sources``, test on the ``test`` files (per file
-      and pooled).
+      and pooled; with ``maps_dir`` an error map per test file, see
+      :func:`evaluate_model`).
 
     ``importance`` adds impurity importance (a random forest on the training
     sample) and permutation importance (held-out block fold 0); ``eliminate``
@@ -409,7 +433,7 @@ def evaluate(
         say("train on all training files:")
         model = train(srcs, classes=cmap, config=cfg, progress=progress, log=lambda m: say("  " + m))
         say("test:")
-        sec = evaluate_model(model, test, progress=progress, log=say)
+        sec = evaluate_model(model, test, progress=progress, log=say, maps_dir=maps_dir)
         sec["title"] = "train on the training files, test on the test files"
         sec["train_seconds"] = model.meta["training"]["seconds"]
         sec["seconds"] = round(time.perf_counter() - t0, 3)
@@ -522,10 +546,7 @@ def write_report(report: dict[str, Any], out_dir: str | os.PathLike) -> list[Pat
     per test file) in ``out_dir`` (created if missing; each file written atomically)."""
     from .._atomic import atomic_path
 
-    d = Path(out_dir)
-    if d.exists() and not d.is_dir():
-        raise LidarfxError(f"{d} exists and is not a folder")
-    d.mkdir(parents=True, exist_ok=True)
+    d = _out_dir(out_dir)
     written = []
     with atomic_path(d / "report.txt") as tmp:
         tmp.write_text(format_report(report) + "\n")
@@ -537,9 +558,15 @@ def write_report(report: dict[str, Any], out_dir: str | os.PathLike) -> list[Pat
         written.append(plot_confusion(sec["metrics"], d / f"confusion_{key}.png", title=sec["title"]))
         if key == "test" and len(sec["files"]) > 1:
             for name, m in sec["files"].items():
-                stem = Path(name).stem.replace(" ", "_")
-                written.append(plot_confusion(m, d / f"confusion_test_{stem}.png", title=f"test: {Path(name).name}"))
+                written.append(plot_confusion(m, d / f"confusion_test_{_stem(name)}.png",
+                                              title=f"test: {Path(name).name}"))
+        if key == "test":
+            written += [Path(m["error_map"]) for m in sec["files"].values() if m.get("error_map")]
     return written
+
+
+def _stem(name: str) -> str:
+    return Path(name).stem.replace(" ", "_")
 
 
 def plot_confusion(m: dict[str, Any], path: str | os.PathLike, title: str | None = None) -> Path:

@@ -180,7 +180,8 @@ def register(sub) -> None:
     e.add_argument("--backward-elimination", action="store_true",
                    help="Chehata-style backward feature elimination with a random forest (slow)")
     e.add_argument("-o", "--out", default=None, metavar="DIR",
-                   help="write report.txt, report.json and confusion_*.png to DIR")
+                   help="write report.txt, report.json and confusion_*.png to DIR; with --model or --test "
+                        "also a plan-view error map errors_<file>.png per test file")
     _add_train_options(e)
     _add_common(e)
     e.set_defaults(func=run_evaluate)
@@ -345,7 +346,7 @@ def run_evaluate(args) -> int:
         model = load_model(args.model)
         if args.precomputed:
             model.features.precomputed = True
-        sec = evaluate_model(model, args.files, log=say)
+        sec = evaluate_model(model, args.files, log=say, maps_dir=args.out)
         report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
                   "config": model.meta["config"], "features": model.feature_names,
                   "classes": model.classes.to_dict(), "class_spec": model.classes.spec(),
@@ -363,7 +364,7 @@ def run_evaluate(args) -> int:
             args.files, test=args.test, cv=cv, block_size=args.spatial_blocks or None,
             random_cv=not args.no_random_folds, leave_one_out=args.leave_one_out, classes=args.classes,
             ignore=_ignore(args), config=_config(args), importance=args.importance,
-            eliminate=args.backward_elimination, log=say,
+            eliminate=args.backward_elimination, log=say, maps_dir=args.out if args.test else None,
         )
     if args.out:
         written = write_report(report, args.out)

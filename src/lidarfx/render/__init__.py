@@ -86,6 +86,155 @@ def feature_views(
 
 
 
+def _raster_cells(u: np.ndarray, v: np.ndarray, pixels: int, cell: float | None) -> tuple[float, int, int, np.ndarray]:
+    """Cell size, raster width and height and the cell index of every point for a picture of about
+    ``pixels`` cells along the longer side (never finer than 1.5 × the mean point spacing)."""
+    ext_u, ext_v = float(np.ptp(u)) if len(u) else 1.0, float(np.ptp(v)) if len(v) else 1.0
+    if cell is None:
+        spacing = math.sqrt(max(ext_u * ext_v, 1e-12) / max(len(u), 1))
+        cell = max(max(ext_u, ext_v, 1e-9) / max(int(pixels), 10), 1.5 * spacing)
+    cell = float(cell)
+    nu = int(ext_u / cell) + 1
+    nv = int(ext_v / cell) + 1
+    iu = np.minimum(((u - u.min()) / cell).astype(np.int64), nu - 1) if len(u) else u.astype(np.int64)
+    iv = np.minimum(((v - v.min()) / cell).astype(np.int64), nv - 1) if len(v) else v.astype(np.int64)
+    return cell, nu, nv, iv * nu + iu
+
+
+CLASS_COLOURS = {"ground": "#b08040", "vegetation": "#2e9e3e", "building": "#d6453d", "water": "#3b7dd8",
+                 "wire": "#9b4fc4", "pole": "#555555", "roof": "#e07b39", "wall": "#d6453d"}
+"""Colours of common class names in :func:`error_map` (others: the tab10 cycle)."""
+
+
+def error_images(
+    xy: np.ndarray,
+    z: np.ndarray,
+    reference: np.ndarray,
+    predicted: np.ndarray,
+    class_names: Sequence[str],
+    *,
+    pixels: int = 600,
+    cell: float | None = None,
+    max_pairs: int = 8,
+) -> dict:
+    """The two rasters of :func:`error_map` as RGB arrays (row 0 = south) and their legends.
+
+    Returns ``left`` and ``right`` (``(rows, cols, 3)`` floats in 0..1), ``cell`` (m),
+    ``class_colours`` (``(k, 3)``), ``pairs`` (``{"ref → pred": points}``, most frequent
+    first, at most ``max_pairs``), ``pair_colours`` (same order), ``other`` (points of
+    the pairs not shown), ``wrong`` and ``scored`` (point counts).
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgb
+
+    xy = np.asarray(xy, dtype=np.float64)
+    z = np.asarray(z, dtype=np.float64)
+    ref = np.asarray(reference, dtype=np.int64)
+    pred = np.asarray(predicted, dtype=np.int64)
+    k = len(class_names)
+    cell, nu, nv, pix = _raster_cells(xy[:, 0], xy[:, 1], pixels, cell)
+    npix = nu * nv
+    # left: predicted class of the highest point per cell
+    tab = plt.get_cmap("tab10")
+    ccol = np.array([to_rgb(CLASS_COLOURS.get(str(n).lower(), tab(i % 10))) for i, n in enumerate(class_names)])
+    order = np.lexsort((z, pix))
+    top = order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]] if len(order) else order
+    left = np.ones((npix, 3))
+    ok = (pred[top] >= 0) & (pred[top] < k)
+    left[pix[top[ok]]] = ccol[pred[top[ok]]]
+    # right: grey by height, then the dominant error pair per cell
+    right = np.ones((npix, 3))
+    if len(top):
+        lo, hi = np.percentile(z, [2, 98])
+        g = 0.62 + 0.3 * np.clip((z[top] - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+        right[pix[top]] = np.c_[g, g, g]
+    scored = ref >= 0
+    wrong = scored & (pred != ref)
+    pair = ref * k + pred
+    counts = np.bincount(pair[wrong], minlength=k * k)
+    ranked = [int(q) for q in np.argsort(-counts, kind="stable") if counts[q] > 0]
+    shown = ranked[:max_pairs]
+    pmap = plt.get_cmap("tab10" if len(shown) <= 10 else "tab20")
+    pcol = {q: np.array(pmap(i % pmap.N)[:3]) for i, q in enumerate(shown)}
+    other = np.array([0.2, 0.2, 0.2])
+    if wrong.any():
+        n_scored = np.bincount(pix[scored], minlength=npix)
+        n_wrong = np.bincount(pix[wrong], minlength=npix)
+        keys, cnt = np.unique(pix[wrong] * (k * k) + pair[wrong], return_counts=True)
+        cells, pairs = keys // (k * k), keys % (k * k)
+        best = np.lexsort((-cnt, cells))
+        first = best[np.r_[0, np.flatnonzero(np.diff(cells[best])) + 1]]
+        c = cells[first]
+        col = np.array([pcol.get(int(q), other) for q in pairs[first]])
+        a = 0.35 + 0.65 * np.minimum(1.0, n_wrong[c] / np.maximum(n_scored[c], 1) / 0.5)
+        right[c] = (1 - a)[:, None] + a[:, None] * col
+    return {
+        "left": left.reshape(nv, nu, 3), "right": right.reshape(nv, nu, 3), "cell": cell, "class_colours": ccol,
+        "pairs": {f"{class_names[q // k]} → {class_names[q % k]}": int(counts[q]) for q in shown},
+        "pair_colours": [pcol[q] for q in shown], "other": int(counts[ranked[len(shown):]].sum()),
+        "wrong": int(wrong.sum()), "scored": int(scored.sum()),
+    }
+
+
+def error_map(
+    xy: np.ndarray,
+    z: np.ndarray,
+    reference: np.ndarray,
+    predicted: np.ndarray,
+    class_names: Sequence[str],
+    path: str | Path,
+    *,
+    pixels: int = 600,
+    cell: float | None = None,
+    title: str | None = None,
+    max_pairs: int = 8,
+    dpi: int = 100,
+) -> tuple[Path, dict[str, int]]:
+    """Plan-view PNG of a classification against its reference: where the errors are.
+
+    ``reference`` and ``predicted`` are class indices into ``class_names``
+    (reference < 0 = not scored); ``xy`` and ``z`` in metres.  Left panel: the
+    predicted class of the highest point of each raster cell.  Right panel: each
+    cell holding a misclassified point takes the colour of its most frequent
+    error (reference → predicted), paler where errors are a small share of the
+    cell's scored points; cells without errors are grey by height.  The legend
+    counts points per error pair.  Returns the path and ``{"ref → pred": points}``
+    for the pairs drawn (see :func:`error_images`).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    im = error_images(xy, z, reference, predicted, class_names, pixels=pixels, cell=cell, max_pairs=max_pairs)
+    nv, nu = im["left"].shape[:2]
+    w = 6.0
+    fig, axes = plt.subplots(1, 2, figsize=(2 * w + 1.5, max(2.5, min(w * nv / nu, 1.4 * w)) + 0.6), squeeze=False)
+    extent = (0, nu * im["cell"], 0, nv * im["cell"])
+    for ax, img, head in ((axes[0, 0], im["left"], "predicted class (highest point)"),
+                          (axes[0, 1], im["right"], "errors: reference → predicted (dominant per cell)")):
+        ax.imshow(img, origin="lower", interpolation="nearest", extent=extent)
+        ax.set_title(head, fontsize=9)
+        ax.set_xlabel("x (East) [m]", fontsize=8)
+        ax.set_ylabel("y (North) [m]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].legend(handles=[plt.Line2D([], [], marker="s", ls="", color=c, label=str(n))
+                               for c, n in zip(im["class_colours"], class_names)], fontsize=7, loc="upper right")
+    handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=f"{lab}: {n:,}")
+               for c, (lab, n) in zip(im["pair_colours"], im["pairs"].items())]
+    if im["other"]:
+        handles.append(plt.Line2D([], [], marker="s", ls="", color=(0.2, 0.2, 0.2), label=f"other: {im['other']:,}"))
+    axes[0, 1].legend(handles=handles or [plt.Line2D([], [], ls="", label="no errors")], fontsize=7,
+                      loc="upper right", title=f"{im['wrong']:,} of {im['scored']:,} points wrong", title_fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return Path(path), im["pairs"]
+
+
 def segment_view(
     cloud: PointCloud,
     path: str | Path,
@@ -121,17 +270,7 @@ def segment_view(
     depth_axis = ({0, 1, 2} - {a, b}).pop()
     xyz = cloud.xyz - cloud.origin
     ids = np.asarray(cloud[attribute]).astype(np.int64)
-    u, v = xyz[:, a], xyz[:, b]
-    ext_u, ext_v = float(np.ptp(u)) if len(u) else 1.0, float(np.ptp(v)) if len(v) else 1.0
-    if cell is None:
-        spacing = math.sqrt(max(ext_u * ext_v, 1e-12) / max(len(u), 1))
-        cell = max(max(ext_u, ext_v, 1e-9) / max(int(pixels), 10), 1.5 * spacing)
-    cell = float(cell)
-    nu = int(ext_u / cell) + 1
-    nv = int(ext_v / cell) + 1
-    iu = np.minimum(((u - u.min(initial=0)) / cell).astype(np.int64), nu - 1) if len(u) else u.astype(np.int64)
-    iv = np.minimum(((v - v.min(initial=0)) / cell).astype(np.int64), nv - 1) if len(v) else v.astype(np.int64)
-    pix = iv * nu + iu
+    cell, nu, nv, pix = _raster_cells(xyz[:, a], xyz[:, b], pixels, cell)
     # nearest to the viewer: highest z from the top, smallest depth from front/side
     near = xyz[:, 2] if view == "top" else -xyz[:, depth_axis]
     order = np.lexsort((near, pix))
