@@ -470,7 +470,10 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["features"] == 52 and summary["radii"] == [0.3, 0.5]  # (14 eigen + 4 height + 8 plane) x 2
     out = d / "b_pred.laz"
-    assert main(["classify", "predict", str(pb), str(out), "--model", str(model), "--confidence", "-q"]) == 0
+    assert main(["classify", "predict", str(pb), str(out), "--model", str(model), "--confidence", "-q",
+                 "--picture", str(d / "b_classes.png"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["picture"] == str(d / "b_classes.png")
+    assert (d / "b_classes.png").stat().st_size > 1000
     pred = lidarfx.read(out)
     ref = lidarfx.read(pb)["classification"]
     ok = ref != 7
@@ -501,6 +504,9 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
         (["train", "{a}", "--model", "{d}/x.skops", "--classes", "2,6"], "no return information"),  # default features
         (["train", "{a}", "--model", "{d}/x.pkl", "--classes", "2,6"], "should end in .skops"),
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops"], "not found"),
+        (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops", "--picture", "{d}/map.jpg"], "PNG files"),
+        (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops", "--picture", "{d}/no/map.png"],
+         "folder does not exist"),
         (["evaluate", "{a}", "--cv", "1"], "at least 2 folds"),
         (["train", "{a}", "--model", "{d}/x.skops", "--density-augment", "0.5,2"], "between 0 and 1"),
         (["evaluate", "{a}", "--classes", "2,6", "--features", "eigen", "-r", "0.5", "--spatial-blocks", "5000",

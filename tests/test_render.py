@@ -1,7 +1,15 @@
 """Pictures: the rasters behind the PNGs are checked cell by cell."""
 import numpy as np
 
-from lidarfx.render import CLASS_COLOURS, _raster_cells, error_images, error_map
+from lidarfx.render import (
+    CLASS_COLOURS,
+    NOT_CLASSIFIED,
+    _raster_cells,
+    class_map,
+    class_raster,
+    error_images,
+    error_map,
+)
 
 
 def _grid(n=20, offset=(500_000.0, 6_000_000.0)):
@@ -76,3 +84,18 @@ def test_error_map_writes_a_png(tmp_path):
     path, pairs = error_map(xy, z, ref, ref, ["ground"], tmp_path / "e.png", title="t")
     assert path.is_file() and path.stat().st_size > 1000 and pairs == {}
     assert not list(tmp_path.glob(".*part*"))  # no temporary file left
+
+
+def test_class_raster_shows_the_highest_point_and_unclassified_grey(tmp_path):
+    xy, _ = _grid(4)
+    xy = np.vstack([xy, xy[:1]])  # a second point in cell (0, 0), higher, of class 1
+    z = np.r_[np.zeros(16), 5.0]
+    cls = np.r_[np.zeros(16, np.int64), 1]
+    cls[5] = -1  # cell (row 1, col 1) not classified
+    cr = class_raster(xy, z, cls, ["ground", "building"], cell=1.0)
+    assert cr["image"].shape == (4, 4, 3)
+    assert np.allclose(cr["image"][0, 0], _rgb(CLASS_COLOURS["building"]))  # the higher point wins
+    assert np.allclose(cr["image"][1, 1], NOT_CLASSIFIED)
+    assert np.allclose(cr["image"][3, 3], _rgb(CLASS_COLOURS["ground"]))
+    assert class_map(xy, z, cls, ["ground", "building"], tmp_path / "c.png").is_file()
+

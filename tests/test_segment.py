@@ -352,6 +352,10 @@ def test_cli_segment_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "max_angle" in err[0]
     assert not (tmp_path / "o.laz").exists()
+    # a picture that cannot be written is refused before any work (no point cloud written)
+    assert main(["segment", str(src), str(tmp_path / "o.laz"), "--picture", str(tmp_path / "no" / "p.png")]) == 2
+    assert "output folder does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "o.laz").exists()
 
 
 def test_cli_picture(tmp_path):

@@ -291,7 +291,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
             from ..render import error_map
 
             u = unit_to_metre(s.cloud)
-            png, pairs = error_map(s.cloud.xyz[:, :2] * u, s.cloud.xyz[:, 2] * u, y, np.where(y >= 0, pred, -1),
+            png, pairs = error_map(s.cloud.xyz[:, :2] * u, s.cloud.xyz[:, 2] * u, y, pred,
                                    [c["name"] for c in m["classes"]], maps / f"errors_{_stem(s.name)}.png",
                                    title=f"{Path(s.name).name}: OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f}")
             m["error_map"], m["error_pairs"] = str(png), pairs

@@ -37,3 +37,17 @@ def read_input(args):
     progress = False if args.quiet else None
     columns = args.columns.split(",") if getattr(args, "columns", None) else None
     return io.read(args.input, columns=columns, progress=progress), progress
+
+
+def check_picture_path(path: str) -> None:
+    """Refuse a picture path before any work: not a .png, or its folder is missing."""
+    from pathlib import Path
+
+    from ..errors import LidarfxError
+
+    p = Path(path)
+    if p.suffix.lower() != ".png":
+        raise LidarfxError(f"picture {path}: pictures are PNG files; give a path ending in .png")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise LidarfxError(f"picture {path}: output folder does not exist: {folder}")

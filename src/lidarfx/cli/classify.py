@@ -5,8 +5,9 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
-from ._args import xyz
+from ._args import check_picture_path, xyz
 
 EPILOG = """examples:
   # train on labelled tiles (ground / vegetation 3+4+5 / building; other classes ignored)
@@ -53,6 +54,7 @@ PREDICT_EPILOG = """examples:
   lidarfx classify predict new.laz out.laz --model m.skops
   lidarfx classify predict new_fx.laz out.laz --model m.skops --precomputed   # features already in the file
   lidarfx classify predict delivered.laz out.laz --model m.skops --ground class   # the file's class 2 is the ground
+  lidarfx classify predict new.laz out.laz --model m.skops --picture classes.png  # + a plan-view class map
 """
 
 
@@ -150,6 +152,8 @@ def register(sub) -> None:
     pr.add_argument("--ground", choices=["smrf", "class"], default=None,
                     help="ground surface for height_above_ground: 'class' = the input's class 2 (e.g. the data "
                          "provider's ground classification) instead of the SMRF filter; default: the model's")
+    pr.add_argument("--picture", default=None, metavar="PNG",
+                    help="also write a plan-view map of the predicted classes (class of the highest point per cell)")
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
@@ -265,6 +269,8 @@ def run_predict(args) -> int:
     from ..classify import load_model
 
     check_not_same_file(args.input, args.output)
+    if args.picture:
+        check_picture_path(args.picture)
     say = _log(args)
     t0 = time.perf_counter()
     model = load_model(args.model)
@@ -280,10 +286,21 @@ def run_predict(args) -> int:
     io.write(out, args.output, progress=False if args.quiet else None)
     t3 = time.perf_counter()
     cls = np.asarray(out["classification"])
+    if args.picture:
+        from ..classify import usable_mask
+        from ..classify.pipeline import unit_to_metre
+        from ..render import class_map
+
+        idx = np.where(usable_mask(out), model.classes.index_of(cls), -1)  # an output code is in its group
+        u = unit_to_metre(out)
+        class_map(out.xyz[:, :2] * u, out.xyz[:, 2] * u, idx, list(model.classes.names), args.picture,
+                  title=f"{Path(args.input).name} classified with {Path(args.model).name}")
+        say(f"class map -> {args.picture}")
     counts = {int(c): int(n) for c, n in zip(*np.unique(cls, return_counts=True))}
     summary = {"input": args.input, "output": args.output, "model": args.model, "points": len(out),
                "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
                "density": out.meta["classify"].get("density"), "ground": model.features.ground,
+               "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:
         json.dump(summary, sys.stdout, indent=2)

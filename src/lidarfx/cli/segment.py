@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._args import read_input, xyz
+from ._args import check_picture_path, read_input, xyz
 
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
@@ -80,6 +80,8 @@ def run(args) -> int:
         write_segments_json,
     )
 
+    if args.picture:
+        check_picture_path(args.picture)
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
     t1 = time.perf_counter()

@@ -11,6 +11,19 @@ from .._atomic import atomic_path
 from ..cloud import PointCloud
 
 
+def _save(fig, path: str | Path, dpi: int) -> Path:
+    """Lay out, write the PNG atomically (temporary file, then rename) and close the figure."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
 def _view_axes(view: str) -> tuple[int, int, str, str]:
     views = {"top": (0, 1, "x (East) [m]", "y (North) [m]"), "front": (0, 2, "x [m]", "z [m]"), "side": (1, 2, "y [m]", "z [m]")}
     return views[view]
@@ -78,11 +91,7 @@ def feature_views(
         ax.tick_params(labelsize=6)
     if title:
         fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, 130)
 
 
 
@@ -106,6 +115,76 @@ CLASS_COLOURS = {"ground": "#b08040", "vegetation": "#2e9e3e", "building": "#d64
 """Colours of common class names in :func:`error_map` (others: the tab10 cycle)."""
 
 
+NOT_CLASSIFIED = (0.78, 0.78, 0.78)
+"""Colour of points without a class index (< 0) in :func:`class_raster`."""
+
+
+def class_raster(
+    xy: np.ndarray, z: np.ndarray, classes: np.ndarray, class_names: Sequence[str], *,
+    pixels: int = 600, cell: float | None = None,
+) -> dict:
+    """Plan-view raster of class indices: each cell shows the class of its highest point.
+
+    ``classes`` are indices into ``class_names`` (< 0 = not classified, drawn in
+    :data:`NOT_CLASSIFIED`); empty cells are white.  Returns ``image``
+    (``(rows, cols, 3)``, row 0 = south), ``colours`` (``(k, 3)``: :data:`CLASS_COLOURS`
+    by name, else the tab10 cycle), ``cell``, ``rows``, ``cols`` and, per point,
+    ``pix`` (its cell), plus ``top`` (the highest point of each occupied cell) and ``z``.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgb
+
+    xy = np.asarray(xy, dtype=np.float64)
+    z = np.asarray(z, dtype=np.float64)
+    cls = np.asarray(classes, dtype=np.int64)
+    k = len(class_names)
+    cell, nu, nv, pix = _raster_cells(xy[:, 0], xy[:, 1], pixels, cell)
+    tab = plt.get_cmap("tab10")
+    ccol = np.array([to_rgb(CLASS_COLOURS.get(str(n).lower(), tab(i % 10))) for i, n in enumerate(class_names)])
+    order = np.lexsort((z, pix))
+    top = order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]] if len(order) else order
+    img = np.ones((nu * nv, 3))
+    ok = (cls[top] >= 0) & (cls[top] < k)
+    img[pix[top[ok]]] = ccol[cls[top[ok]]]
+    img[pix[top[~ok]]] = NOT_CLASSIFIED
+    return {"image": img.reshape(nv, nu, 3), "colours": ccol.reshape(k, 3), "cell": cell, "rows": nv, "cols": nu,
+            "pix": pix, "top": top, "z": z}
+
+
+def class_map(
+    xy: np.ndarray, z: np.ndarray, classes: np.ndarray, class_names: Sequence[str], path: str | Path, *,
+    pixels: int = 700, cell: float | None = None, title: str | None = None, dpi: int = 100,
+) -> Path:
+    """Plan-view PNG of a classification (class of the highest point per cell; see
+    :func:`class_raster`), with the number of points per class in the legend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cr = class_raster(xy, z, classes, class_names, pixels=pixels, cell=cell)
+    cls = np.asarray(classes, dtype=np.int64)
+    k = len(class_names)
+    counts = np.bincount(cls[(cls >= 0) & (cls < k)], minlength=k)
+    nv, nu = cr["rows"], cr["cols"]
+    w = 7.0
+    fig, ax = plt.subplots(figsize=(w + 1.0, max(2.5, min(w * nv / nu, 1.4 * w)) + 0.5))
+    ax.imshow(cr["image"], origin="lower", interpolation="nearest", extent=(0, nu * cr["cell"], 0, nv * cr["cell"]))
+    handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=f"{n}: {int(m):,}")
+               for c, n, m in zip(cr["colours"], class_names, counts)]
+    rest = int(len(cls) - counts.sum())
+    if rest:
+        handles.append(plt.Line2D([], [], marker="s", ls="", color=NOT_CLASSIFIED, label=f"not classified: {rest:,}"))
+    ax.legend(handles=handles, fontsize=7, loc="upper right", title="class of the highest point (points)",
+              title_fontsize=7)
+    ax.set_xlabel("x (East) [m]", fontsize=8)
+    ax.set_ylabel("y (North) [m]", fontsize=8)
+    ax.tick_params(labelsize=7)
+    if title:
+        ax.set_title(title, fontsize=9)
+    return _save(fig, path, dpi)
+
+
 def error_images(
     xy: np.ndarray,
     z: np.ndarray,
@@ -125,23 +204,14 @@ def error_images(
     the pairs not shown), ``wrong`` and ``scored`` (point counts).
     """
     import matplotlib.pyplot as plt
-    from matplotlib.colors import to_rgb
 
-    xy = np.asarray(xy, dtype=np.float64)
-    z = np.asarray(z, dtype=np.float64)
     ref = np.asarray(reference, dtype=np.int64)
     pred = np.asarray(predicted, dtype=np.int64)
     k = len(class_names)
-    cell, nu, nv, pix = _raster_cells(xy[:, 0], xy[:, 1], pixels, cell)
+    cr = class_raster(xy, z, pred, class_names, pixels=pixels, cell=cell)
+    cell, nu, nv, pix, top, z, ccol = cr["cell"], cr["cols"], cr["rows"], cr["pix"], cr["top"], cr["z"], cr["colours"]
     npix = nu * nv
-    # left: predicted class of the highest point per cell
-    tab = plt.get_cmap("tab10")
-    ccol = np.array([to_rgb(CLASS_COLOURS.get(str(n).lower(), tab(i % 10))) for i, n in enumerate(class_names)])
-    order = np.lexsort((z, pix))
-    top = order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]] if len(order) else order
-    left = np.ones((npix, 3))
-    ok = (pred[top] >= 0) & (pred[top] < k)
-    left[pix[top[ok]]] = ccol[pred[top[ok]]]
+    left = cr["image"].reshape(npix, 3)
     # right: grey by height, then the dominant error pair per cell
     right = np.ones((npix, 3))
     if len(top):
@@ -228,11 +298,7 @@ def error_map(
                       loc="upper right", title=f"{im['wrong']:,} of {im['scored']:,} points wrong", title_fontsize=7)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
-    return Path(path), im["pairs"]
+    return _save(fig, path, dpi), im["pairs"]
 
 
 def segment_view(
@@ -313,8 +379,4 @@ def segment_view(
         ax.tick_params(labelsize=7)
     if title:
         axes[0, npan - 1].set_title(title, fontsize=9)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, dpi)
