@@ -239,12 +239,13 @@ def _thinned_features(sources: list[Source], copies: list[tuple[Source, np.ndarr
     return np.vstack(Xs), np.concatenate(rows)
 
 
-def _out_dir(out_dir: str | os.PathLike) -> Path:
-    """The report folder, created if missing (an error if it is a file)."""
+def _out_dir(out_dir: str | os.PathLike, create: bool = True) -> Path:
+    """The report folder (an error if it is a file), created if missing and ``create``."""
     d = Path(out_dir)
     if d.exists() and not d.is_dir():
         raise LidarfxError(f"{d} exists and is not a folder")
-    d.mkdir(parents=True, exist_ok=True)
+    if create:
+        d.mkdir(parents=True, exist_ok=True)
     return d
 
 
@@ -259,7 +260,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     is written there (:func:`lidarfx.render.error_map`; its path in the file's
     ``error_map``, the points of its error pairs in ``error_pairs``).
     """
-    maps = _out_dir(maps_dir) if maps_dir is not None else None
+    maps = _out_dir(maps_dir, create=False) if maps_dir is not None else None  # refused before any work
     srcs = read_sources(sources, progress=progress)
     cmap = model.classes
     k = len(cmap)
@@ -291,6 +292,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
             from ..render import error_map
 
             u = unit_to_metre(s.cloud)
+            _out_dir(maps)
             png, pairs = error_map(s.cloud.xyz[:, :2] * u, s.cloud.xyz[:, 2] * u, y, pred,
                                    [c["name"] for c in m["classes"]], maps / f"errors_{_stem(s.name)}.png",
                                    title=f"{Path(s.name).name}: OA {m['oa']:.4f}, mean F1 {m['mean_f1']:.4f}")

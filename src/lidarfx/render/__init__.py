@@ -94,7 +94,6 @@ def feature_views(
     return _save(fig, path, 130)
 
 
-
 def _raster_cells(u: np.ndarray, v: np.ndarray, pixels: int, cell: float | None) -> tuple[float, int, int, np.ndarray]:
     """Cell size, raster width and height and the cell index of every point for a picture of about
     ``pixels`` cells along the longer side (never finer than 1.5 × the mean point spacing)."""
@@ -112,8 +111,7 @@ def _raster_cells(u: np.ndarray, v: np.ndarray, pixels: int, cell: float | None)
 
 CLASS_COLOURS = {"ground": "#b08040", "vegetation": "#2e9e3e", "building": "#d6453d", "water": "#3b7dd8",
                  "wire": "#9b4fc4", "pole": "#555555", "roof": "#e07b39", "wall": "#d6453d"}
-"""Colours of common class names in :func:`error_map` (others: the tab10 cycle)."""
-
+"""Colours of common class names in :func:`class_raster` and :func:`error_map` (others: the tab10 cycle)."""
 
 NOT_CLASSIFIED = (0.78, 0.78, 0.78)
 """Colour of points without a class index (< 0) in :func:`class_raster`."""
