@@ -622,6 +622,24 @@ def test_mostly_unusable_points_warn(facades, rf_model):
     assert out.meta["classify"]["predicted_points"] == len(b) - int(flag.sum())
 
 
+def test_prediction_in_chunks_equals_one_pass(facades, rf_model, monkeypatch):
+    import lidarfx.classify.model as model_module
+
+    b = facades[1]
+    codes, conf = rf_model.predict(b, return_confidence=True)
+    proba, usable = rf_model.predict_proba(b)
+    X = rf_model.feature_matrix(b.subset(usable) if not usable.all() else b)
+    monkeypatch.setattr(model_module, "PREDICT_CHUNK", 997)  # many chunks, the last one short
+    assert len(b) > 5 * 997
+    assert [r.stop - r.start for r, _ in rf_model.feature_chunks(b)][-1] == len(b) % 997
+    codes2, conf2 = rf_model.predict(b, return_confidence=True)
+    proba2, _ = rf_model.predict_proba(b)
+    assert np.array_equal(codes, codes2) and np.array_equal(conf, conf2, equal_nan=True)
+    assert np.array_equal(proba, proba2)
+    assert np.array_equal(rf_model.feature_matrix(b.subset(usable) if not usable.all() else b), X, equal_nan=True)
+    assert np.array_equal(codes, rf_model.predict(b))  # the no-confidence path gives the same classes
+
+
 def test_evaluate_model_without_model_classes(facades, rf_model):
     from lidarfx.classify import evaluate_model
     from lidarfx.errors import LidarfxWarning

@@ -15,7 +15,7 @@ import time
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -72,6 +72,10 @@ TRUSTED_TYPES: tuple[str, ...] = (
 )
 
 DEFAULT_MAX_PER_CLASS = 20_000
+
+#: prediction computes and classifies the features of this many points at a time: the feature
+#: matrix of a whole 40-million-point tile (81 float32 columns) would need 13 GB; a chunk needs 0.3 GB
+PREDICT_CHUNK = 1_000_000
 
 #: prediction warns when a cloud has less than this share of the sparsest training file's
 #: density: on the IGN training tiles (leave one tile out) OA fell by 0.01 at half the
@@ -371,29 +375,43 @@ class ClassifierModel:
                 "(train on data like this, or with --density-augment)", LidarfxWarning, stacklevel=2)
         return info
 
-    def feature_matrix(self, cloud: PointCloud, index: np.ndarray | None = None, chunk: int = 1_000_000,
-                       progress: bool | None = False) -> np.ndarray:
-        """Features of ``cloud`` (rows ``index``, default all) as the model computes them."""
+    def feature_chunks(self, cloud: PointCloud, index: np.ndarray | None = None, chunk: int | None = None,
+                       progress: bool | None = False) -> Iterator[tuple[slice, np.ndarray]]:
+        """``(rows, X)`` for consecutive chunks of ``index`` (default all points): the features of
+        ``chunk`` (default :data:`PREDICT_CHUNK`) query points at a time, so memory stays bounded on
+        large clouds (every point of ``cloud`` is a neighbour; the height above ground is computed once)."""
+        chunk = int(chunk or PREDICT_CHUNK)
         tr = self.features
         tr.progress = progress
         names, slots, point, rs = tr._plan()
         self.check(cloud)
         idx = np.arange(len(cloud)) if index is None else np.asarray(index)
         cache: dict = {}
-        blocks = [tr._matrix(CloudSample(cloud, idx[a:a + chunk]), names, slots, point, rs, cache)
-                  for a in range(0, len(idx), chunk)] or [np.empty((0, len(names)), np.float32)]
+        for a in range(0, len(idx), chunk):
+            yield slice(a, min(a + chunk, len(idx))), tr._matrix(CloudSample(cloud, idx[a:a + chunk]), names, slots,
+                                                                  point, rs, cache)
+
+    def feature_matrix(self, cloud: PointCloud, index: np.ndarray | None = None, chunk: int | None = None,
+                       progress: bool | None = False) -> np.ndarray:
+        """Features of ``cloud`` (rows ``index``, default all) as the model computes them."""
+        blocks = [X for _, X in self.feature_chunks(cloud, index, chunk, progress)]
+        if not blocks:
+            return np.empty((0, len(self.feature_names)), np.float32)
         return np.vstack(blocks) if len(blocks) > 1 else blocks[0]
 
     def predict_proba(self, cloud: PointCloud, *, progress: bool | None = False, check_density: bool = True
                       ) -> tuple[np.ndarray, np.ndarray]:
         """``(proba, usable)``: class probabilities (n_usable × k) of the usable points and the mask
-        (``check_density``: as in :meth:`predict`)."""
+        (``check_density``: as in :meth:`predict`).  Features are computed and classified one chunk
+        of :data:`PREDICT_CHUNK` points at a time; only the probabilities are kept."""
         if check_density:
             self.density_check(cloud)
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
-        X = self.feature_matrix(sub, progress=progress)
-        return self._proba_matrix(X), usable
+        proba = np.empty((len(sub), len(self.classes)), dtype=np.float64)
+        for rows, X in self.feature_chunks(sub, progress=progress):
+            proba[rows] = self._proba_matrix(X)
+        return proba, usable
 
     def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False,
                 check_density: bool = True):
@@ -405,17 +423,22 @@ class ClassifierModel:
             self.density_check(cloud)
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
-        X = self.feature_matrix(sub, progress=progress)
+        k = np.empty(len(sub), dtype=np.int64)
+        best = np.empty(len(sub), dtype=np.float32) if return_confidence else None
+        for rows, X in self.feature_chunks(sub, progress=progress):  # bounded memory on large clouds
+            if best is not None:
+                proba = self._proba_matrix(X)
+                k[rows] = proba.argmax(axis=1)
+                best[rows] = proba[np.arange(len(proba)), k[rows]]
+            else:
+                k[rows] = self._predict_matrix(X)
         codes = np.full(len(cloud), -1, dtype=np.int16)
-        if return_confidence:
-            proba = self._proba_matrix(X)
-            k = proba.argmax(axis=1)
-            conf = np.full(len(cloud), np.nan, dtype=np.float32)
-            conf[usable] = proba[np.arange(len(k)), k]
-        else:
-            k = self._predict_matrix(X)
         codes[usable] = self.classes.code_of(k)
-        return (codes, conf) if return_confidence else codes
+        if best is None:
+            return codes
+        conf = np.full(len(cloud), np.nan, dtype=np.float32)
+        conf[usable] = best
+        return codes, conf
 
     def classify(self, cloud: PointCloud, *, confidence: bool = False, progress: bool | None = False) -> PointCloud:
         """A copy of ``cloud`` with ``classification`` set to the predicted codes (points
