@@ -139,6 +139,13 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         (["convert", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),
         (["convert", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
         (["convert", "{tmp}/a.xyz", "{tmp}/b.las", "--columns", "x,y"], "no column named z"),
+        # outputs are checked before any work (the model does not exist: its error would come later)
+        (["features", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
+        (["segment", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
+        (["classify", "predict", "{tmp}/a.xyz", "{tmp}/b.e57", "--model", "{tmp}/none.skops"], "unknown file extension"),
+        (["classify", "predict", "{tmp}/a.xyz", "{tmp}/nodir/b.laz", "--model", "{tmp}/none.skops"],
+         "output folder does not exist"),
     ],
 )
 def test_cli_errors_in_process(tmp_path, capsys, argv, message):
@@ -177,3 +184,17 @@ def test_cli_subprocess_info_json(tmp_path):
     res = json.loads(proc.stdout)
     assert res["points"] == 11_231
     assert {c["code"]: c["count"] for c in res["classes"]} == {0: 5_629, 2: 5_602}
+
+
+def test_check_output_path(tmp_path):
+    from lidarfx.errors import LidarfxError
+    from lidarfx.io import check_output_path
+
+    assert check_output_path(tmp_path / "ok.laz") == tmp_path / "ok.laz"
+    (tmp_path / "d.laz").mkdir()
+    with pytest.raises(LidarfxError, match="is a folder"):
+        check_output_path(tmp_path / "d.laz")
+    with pytest.raises(LidarfxError, match="unknown file extension"):
+        check_output_path(tmp_path / "x.e57")
+    with pytest.raises(LidarfxError, match="output folder does not exist"):
+        check_output_path(tmp_path / "no" / "x.las")

@@ -23,17 +23,26 @@ def xyz(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def check_output(input_path: str, output_path: str) -> None:
+    """Before any work: the output is not the input (inputs are never modified), its format is
+    known from the extension and its folder exists."""
+    from .._atomic import check_not_same_file
+    from ..io import check_output_path
+
+    check_not_same_file(input_path, output_path)
+    check_output_path(output_path)
+
+
 def read_input(args):
     """Read ``args.input`` for a command that writes ``args.output``.
 
-    Refuses an output that is the input (inputs are never modified), applies the
+    Refuses a bad output first (:func:`check_output`), applies the
     ``--columns`` spec of text input and shows progress unless ``-q``.  Returns
     ``(cloud, progress)``; ``progress`` is what to pass on to the later steps.
     """
     from .. import io
-    from .._atomic import check_not_same_file
 
-    check_not_same_file(args.input, args.output)
+    check_output(args.input, args.output)
     progress = False if args.quiet else None
     columns = args.columns.split(",") if getattr(args, "columns", None) else None
     return io.read(args.input, columns=columns, progress=progress), progress

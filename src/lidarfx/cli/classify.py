@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._args import check_picture_path, xyz
+from ._args import check_output, check_picture_path, xyz
 
 EPILOG = """examples:
   # train on labelled tiles (ground / vegetation 3+4+5 / building; other classes ignored)
@@ -265,10 +265,9 @@ def run_predict(args) -> int:
     import numpy as np
 
     from .. import io
-    from .._atomic import check_not_same_file
     from ..classify import load_model
 
-    check_not_same_file(args.input, args.output)
+    check_output(args.input, args.output)
     if args.picture:
         check_picture_path(args.picture)
     say = _log(args)

@@ -6,6 +6,8 @@ import json
 import sys
 import time
 
+from ._args import check_output
+
 GROUND_EPILOG = """examples:
   lidarfx ground in.laz out.laz                        # class 2 = ground, 1 = other (noise 7/18 kept)
   lidarfx ground in.laz out.laz --hag --dtm dtm.tif    # + height_above_ground attribute + 1 m DTM
@@ -144,7 +146,6 @@ def _check_raster_path(path: str) -> None:
 
 def run_ground(args) -> int:
     from .. import io
-    from .._atomic import check_not_same_file
     from ..ground import (
         apply_ground_classification,
         classify_ground,
@@ -152,7 +153,7 @@ def run_ground(args) -> int:
         height_above_ground,
     )
 
-    check_not_same_file(args.input, args.output)
+    check_output(args.input, args.output)
     if args.dtm:
         _check_raster_path(args.dtm)
     progress = False if args.quiet else None

@@ -96,6 +96,18 @@ def _format_module(path: Path):
     return importlib.import_module(f"{__name__}.{name}")
 
 
+def check_output_path(path: str | os.PathLike) -> Path:
+    """Refuse an output path before any work: unknown extension or a missing folder."""
+    p = Path(path)
+    _format_module(p)
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise LidarfxError(f"output folder does not exist: {folder}")
+    if p.is_dir():
+        raise LidarfxError(f"{p} is a folder; give an output file name")
+    return p
+
+
 def _input_module(path: Path):
     """The format module for an existing input file (else a one-line error)."""
     module = _format_module(path)
