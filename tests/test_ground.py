@@ -316,6 +316,61 @@ def test_tin_interpolate_is_linear_and_falls_back_to_nearest():
     assert tin_interpolate(xy[:2], v[:2], q[:1])[0] == pytest.approx(v[0])
 
 
+def _gappy_ground(seed: int, n: int = 6000):
+    """Random ground points (float coordinates: no cocircular quadruples) over 200 m x 120 m with
+    two large holes (a 'building' and a 'lake') and a ragged edge."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform([0, 0], [200, 120], (3 * n, 2))
+    keep = ~((np.abs(xy[:, 0] - 60) < 25) & (np.abs(xy[:, 1] - 60) < 20))  # 50 x 40 m hole
+    keep &= np.hypot(xy[:, 0] - 150, xy[:, 1] - 40) > 30  # 60 m round hole
+    keep &= xy[:, 1] < 100 + 15 * np.sin(xy[:, 0] / 9)  # ragged northern edge
+    xy = xy[keep][:n]
+    z = 0.05 * xy[:, 0] + 3 * np.sin(xy[:, 1] / 17) + rng.normal(0, 0.2, len(xy))
+    return xy, z
+
+
+@pytest.mark.parametrize("max_points", [300, 1500])
+def test_tin_tiled_equals_one_piece(max_points, monkeypatch):
+    import sys
+
+    tin_module = sys.modules["lidarfx.ground.tin"]
+    xy, z = _gappy_ground(1)
+    rng = np.random.default_rng(2)
+    q = rng.uniform([-30, -30], [230, 150], (10_000, 2))  # also far outside the hull, and in the holes
+    one = tin_interpolate(xy, z, q)
+    widths = []
+    real = tin_module._tin_one
+    monkeypatch.setattr(tin_module, "_tin_one",
+                        lambda *a: widths.append(a[5][2] - a[5][0] if len(a) > 5 else np.inf) or real(*a))
+    tiled = tin_interpolate(xy, z, q, max_points=max_points)
+    assert np.array_equal(one, tiled)
+    # tiles were used, and the queries in the holes needed larger areas than their tile's
+    assert len(widths) > 4 and max(w for w in widths if np.isfinite(w)) > 1.5 * min(widths)
+    assert np.array_equal(tin_interpolate(xy, z, q, nearest_outside=False),
+                          tin_interpolate(xy, z, q, nearest_outside=False, max_points=max_points), equal_nan=True)
+
+
+def test_height_above_ground_is_tiled_above_the_limit(monkeypatch):
+    import sys
+
+    dtm_module = sys.modules["lidarfx.ground.dtm"]  # lidarfx.ground.dtm is also the name of a function
+    tin_module = sys.modules["lidarfx.ground.tin"]
+
+    xy, z = _gappy_ground(3, 4000)
+    rng = np.random.default_rng(4)
+    objects = np.column_stack([rng.uniform(0, 200, 3000), rng.uniform(0, 120, 3000), rng.uniform(0, 20, 3000)])
+    xyz = np.vstack([np.column_stack([xy, z]), objects]) + [600_000.0, 5_000_000.0, 100.0]
+    mask = np.r_[np.ones(len(xy), bool), np.zeros(len(objects), bool)]
+    one = height_above_ground(xyz, mask)
+    calls = []
+    real = tin_module._tin_tiled
+    monkeypatch.setattr(tin_module, "_tin_tiled", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(dtm_module, "TIN_TILE_POINTS", 800)
+    tiled = height_above_ground(xyz, mask)
+    # ground points are triangle corners: a neighbouring triangle may give the last bit differently
+    assert calls and np.allclose(one, tiled, rtol=0, atol=1e-6)
+
+
 # ------------------------------------------------------------------ rasters
 def test_raster_writers(tmp_path):
     PIL = pytest.importorskip("PIL.Image")

@@ -9,7 +9,7 @@ import numpy as np
 from ..cloud import PointCloud
 from ..errors import LidarfxError
 from .raster import Raster
-from .tin import tin_interpolate
+from .tin import TIN_TILE_POINTS, tin_interpolate
 
 __all__ = ["dtm", "height_above_ground", "ground_mask_of", "cloud_crs"]
 
@@ -132,6 +132,7 @@ def dtm(
         np.column_stack([g[:, 0] - x0, g[:, 1] - y0]),
         g[:, 2] - zref,
         np.column_stack([qx.ravel(), qy.ravel()]),
+        max_points=TIN_TILE_POINTS,
     )
     array = (vals + zref).reshape(rows, cols).astype(np.float32)
     return Raster(array, (x0, ytop), r, crs, meta={"ground_points": int(len(g)), "method": "tin"})
@@ -174,5 +175,5 @@ def height_above_ground(cloud: Any, ground: Any = None) -> np.ndarray:
         return np.full(len(xyz), np.nan, dtype=np.float32)
     origin = xyz.min(axis=0)
     local = xyz - origin
-    surf = tin_interpolate(local[mask, :2], local[mask, 2], local[:, :2])
+    surf = tin_interpolate(local[mask, :2], local[mask, 2], local[:, :2], max_points=TIN_TILE_POINTS)
     return (local[:, 2] - surf).astype(np.float32)

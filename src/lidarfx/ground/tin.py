@@ -9,39 +9,63 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
-from scipy.spatial import Delaunay, QhullError, cKDTree
+from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
-__all__ = ["tin_interpolate"]
+__all__ = ["tin_interpolate", "TIN_TILE_POINTS"]
+
+TIN_TILE_POINTS = 4_000_000
+"""With ``max_points``, more known points than this are triangulated tile by tile (bounded memory:
+Qhull needs about 0.6 kB per point)."""
+
+
+@nb.njit(cache=True, inline="always")
+def _bary(px, py, a, b, c, x, y):
+    """Barycentric coordinates (l0, l1) of (x, y) in triangle a, b, c and the determinant (0: flat)."""
+    xa = px[a]
+    ya = py[a]
+    xb = px[b]
+    yb = py[b]
+    xc = px[c]
+    yc = py[c]
+    det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
+    if det == 0.0:
+        return 0.0, 0.0, det
+    l0 = ((yb - yc) * (x - xc) + (xc - xb) * (y - yc)) / det
+    l1 = ((yc - ya) * (x - xc) + (xa - xc) * (y - yc)) / det
+    return l0, l1, det
 
 
 @nb.njit(cache=True)
-def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out):
+def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out, found):
     n = qx.shape[0]
     for k in range(n):
         t = start[k]
         x = qx[k]
         y = qy[k]
         out[k] = np.nan
+        found[k] = -1
         rot = k
         for _ in range(max_steps):  # a query outside the hull and collinear with a hull
             # edge can circle a hull corner for ever: give up (NaN -> nearest)
             a = simp[t, 0]
             b = simp[t, 1]
             c = simp[t, 2]
-            xa = px[a]
-            ya = py[a]
-            xb = px[b]
-            yb = py[b]
-            xc = px[c]
-            yc = py[c]
-            det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
+            l0, l1, det = _bary(px, py, a, b, c, x, y)
             if det == 0.0:
                 break
-            l0 = ((yb - yc) * (x - xc) + (xc - xb) * (y - yc)) / det
-            l1 = ((yc - ya) * (x - xc) + (xa - xc) * (y - yc)) / det
             l2 = 1.0 - l0 - l1
             if l0 >= -1e-12 and l1 >= -1e-12 and l2 >= -1e-12:
-                out[k] = l0 * vals[a] + l1 * vals[b] + l2 * vals[c]
+                # the value from the vertices in index order: the same triangle then gives the
+                # same bits whatever order the triangulation lists it in (tiles, see tin_interpolate)
+                if a > b:
+                    a, b = b, a
+                if b > c:
+                    b, c = c, b
+                if a > b:
+                    a, b = b, a
+                l0, l1, det = _bary(px, py, a, b, c, x, y)
+                out[k] = l0 * vals[a] + l1 * vals[b] + (1.0 - l0 - l1) * vals[c]
+                found[k] = t
                 break
             # stochastic visibility walk: cross the first edge (from a rotating
             # start) whose opposite coordinate is negative; it terminates even
@@ -60,8 +84,8 @@ def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out):
             t = nt
 
 
-def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, nearest_outside: bool = True, joggle: bool = False
-) -> np.ndarray:
+def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, nearest_outside: bool = True,
+                    joggle: bool = False, max_points: int | None = None) -> np.ndarray:
     """Linear (TIN) interpolation of ``values`` known at ``xy`` (n×2) at ``query`` (m×2).
 
     Queries outside the convex hull get the value of the nearest known point
@@ -70,21 +94,47 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     local (small numbers) for accuracy.  ``joggle`` triangulates with
     Qhull's ``QJ`` option: about twice as fast on regular grids (many
     cocircular points), for inputs without duplicate xy.
+
+    ``max_points``: with more known points than this, the queries are answered
+    tile by tile from the Delaunay triangulation of the known points in the tile
+    and a margin (bounded memory).  A query's answer is accepted only when it is
+    provably the one of the whole triangulation: the circumcircle of its triangle
+    lies inside the triangulated area (so the triangle is Delaunay for all points),
+    or, outside the convex hull of all points, the circle through its nearest
+    point does.  Other queries are retried with twice the margin.  The result
+    equals the one-piece interpolation, except where four or more known points lie
+    on one circle: there both triangulations are valid and may split differently.
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     values = np.ascontiguousarray(values, dtype=np.float64)
     query = np.ascontiguousarray(query, dtype=np.float64)
+    if max_points is not None and len(xy) > max(int(max_points), 3) and len(query):
+        return _tin_tiled(xy, values, query, nearest_outside, joggle, int(max_points))
+    return _tin_one(xy, values, query, nearest_outside, joggle)[0]
+
+
+def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
+             box: tuple[float, float, float, float] | None = None, outside_all: np.ndarray | None = None,
+             extent: tuple[np.ndarray, np.ndarray] | None = None,
+             ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """One triangulation.  With ``box`` (x0, y0, x1, y1: the area whose known points are all in
+    ``xy``) also a mask of the answers that equal the whole triangulation's (see
+    :func:`tin_interpolate`) and, per query, the box (x0, y0, x1, y1) an answer would need
+    (the bounding box of its circle, cut to ``extent`` = (lo, hi) of all points: no point lies
+    beyond); ``outside_all``: queries outside the hull of all points."""
     out = np.full(len(query), np.nan)
+    need = np.column_stack([query, query]) if box is not None else None
     if len(xy) == 0 or len(query) == 0:
-        return out
+        return out, (np.zeros(len(query), bool) if box is not None else None), need
     tree = cKDTree(xy)
-    _, nn = tree.query(query)
+    dist, nn = tree.query(query)
     tri = None
     if len(xy) >= 3:
         try:
             tri = Delaunay(xy, qhull_options="Qbb Qc Qz Q12 QJ" if joggle else None)
         except (QhullError, ValueError):
             tri = None
+    found = np.full(len(query), -1, dtype=np.int64)
     if tri is not None and len(tri.simplices):
         v2s = tri.vertex_to_simplex.astype(np.int64)
         if len(tri.coplanar):  # duplicate / coplanar points: start at the facet they fell into
@@ -103,8 +153,90 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
             start,
             max_steps,
             out,
+            found,
         )
+    bad = ~np.isfinite(out)
     if nearest_outside:
-        bad = ~np.isfinite(out)
         out[bad] = values[nn[bad]]
+    if box is None:
+        return out, None, None
+    x0, y0, x1, y1 = box
+    # a circle (centre, radius) per query: its triangle's circumcircle, or (outside every triangle)
+    # the circle through the nearest point, which decides the answer outside the hull of all points
+    cx, cy = query[:, 0].copy(), query[:, 1].copy()
+    r = dist * (1 + 1e-9) + 1e-9
+    hit = np.flatnonzero(found >= 0)
+    if len(hit):
+        p = tri.points[tri.simplices[found[hit]]]  # (h, 3, 2)
+        ax, ay, bx, by, qx, qy = p[:, 0, 0], p[:, 0, 1], p[:, 1, 0], p[:, 1, 1], p[:, 2, 0], p[:, 2, 1]
+        d = 2.0 * (ax * (by - qy) + bx * (qy - ay) + qx * (ay - by))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a2, b2, c2 = ax * ax + ay * ay, bx * bx + by * by, qx * qx + qy * qy
+            ux = (a2 * (by - qy) + b2 * (qy - ay) + c2 * (ay - by)) / d
+            uy = (a2 * (qx - bx) + b2 * (ax - qx) + c2 * (bx - ax)) / d
+            rr = np.hypot(ax - ux, ay - uy) * (1 + 1e-9) + 1e-9
+        good = np.isfinite(rr)
+        cx[hit[good]], cy[hit[good]], r[hit[good]] = ux[good], uy[good], rr[good]
+    if extent is None:
+        need = np.column_stack([cx - r, cy - r, cx + r, cy + r])
+    else:  # only the part of the circle inside the extent matters (slivers along a straight edge of
+        # the data have huge circles that reach little but empty space): a box around circle ∩ extent
+        (ex0, ey0), (ex1, ey1) = extent
+        hx = np.sqrt(np.maximum(r * r - (np.clip(cy, ey0, ey1) - cy) ** 2, 0.0))  # widest chord in the y band
+        hy = np.sqrt(np.maximum(r * r - (np.clip(cx, ex0, ex1) - cx) ** 2, 0.0))
+        need = np.column_stack([np.maximum(cx - hx, ex0), np.maximum(cy - hy, ey0),
+                                np.minimum(cx + hx, ex1), np.minimum(cy + hy, ey1)])
+    inside = (need[:, 0] >= x0) & (need[:, 1] >= y0) & (need[:, 2] <= x1) & (need[:, 3] <= y1)
+    ok = np.zeros(len(query), dtype=bool)
+    ok[hit] = inside[hit]
+    if outside_all is not None:
+        miss = bad & outside_all
+        ok[miss] = inside[miss]
+    return out, ok, need
+
+
+def _outside_hull(xy: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Queries strictly outside the convex hull of ``xy`` (all False when the hull is degenerate)."""
+    try:
+        hull = ConvexHull(xy)
+    except (QhullError, ValueError):
+        return np.zeros(len(query), dtype=bool)
+    eq = hull.equations  # a x + b y + c <= 0 inside
+    scale = float(np.abs(xy).max()) + 1.0
+    out = np.zeros(len(query), dtype=bool)
+    for a, b, c in eq:
+        out |= a * query[:, 0] + b * query[:, 1] + c > 1e-9 * scale
+    return out
+
+
+def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
+               max_points: int) -> np.ndarray:
+    out = np.full(len(query), np.nan)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    area = max(float(np.prod(np.maximum(hi - lo, 1e-9))), 1e-12)
+    side = max(float(np.sqrt(area * max_points / (2.0 * len(xy)))), 1e-6)  # ~ max_points/2 known points per tile
+    outside_all = _outside_hull(xy, query) if nearest_outside else np.zeros(len(query), dtype=bool)
+    qlo = query.min(axis=0)
+    tij = np.floor((query - qlo) / side).astype(np.int64)
+    key = tij[:, 0] * (int(tij[:, 1].max()) + 1) + tij[:, 1]
+    order = np.argsort(key, kind="stable")
+    for todo in np.split(order, np.flatnonzero(np.diff(key[order])) + 1):
+        x0, y0 = qlo + tij[todo[0]] * side
+        box = (x0 - side / 8, y0 - side / 8, x0 + 1.125 * side, y0 + 1.125 * side)  # a margin of side / 8
+        while len(todo):
+            if box[0] <= lo[0] and box[1] <= lo[1] and box[2] >= hi[0] and box[3] >= hi[1]:
+                out[todo] = _tin_one(xy, values, query[todo], nearest_outside, joggle)[0]  # all points
+                break
+            sel = np.flatnonzero((xy[:, 0] >= box[0]) & (xy[:, 0] <= box[2])
+                                 & (xy[:, 1] >= box[1]) & (xy[:, 1] <= box[3]))
+            v, ok, need = _tin_one(xy[sel], values[sel], query[todo], nearest_outside, joggle, box, outside_all[todo],
+                                   (lo, hi))
+            out[todo[ok]] = v[ok]
+            todo, need = todo[~ok], need[~ok]
+            if len(todo):  # the next area: every circle still needed, and more than this one
+                w = max(box[2] - box[0], box[3] - box[1]) / 2
+                grow = np.array([need[:, 0].min() - w / 4, need[:, 1].min() - w / 4,
+                                 need[:, 2].max() + w / 4, need[:, 3].max() + w / 4])
+                box = (min(grow[0], box[0] - w / 4), min(grow[1], box[1] - w / 4),
+                       max(grow[2], box[2] + w / 4), max(grow[3], box[3] + w / 4))
     return out
