@@ -125,6 +125,15 @@ def test_synthetic_terrain_buildings_trees():
     assert np.array_equal(classify_ground(xyz - xyz.min(axis=0)), mask)
 
 
+def test_final_test_in_chunks_equals_one_pass(monkeypatch):
+    import sys
+
+    xyz, _ = _scene()
+    one = classify_ground(xyz)
+    monkeypatch.setattr(sys.modules["lidarfx.ground.smrf"], "POINT_CHUNK", 997)
+    assert len(xyz) > 3 * 997 and np.array_equal(classify_ground(xyz), one)
+
+
 def test_dike_and_ditch_stay_ground():
     # plain SMRF opens the 3 m dike (1:2 slopes) away and rejects its crest;
     # the step check returns the smooth, step-free region to the terrain

@@ -145,8 +145,8 @@ def classify_ground(
     idx = np.nonzero(cand)[0]
     if len(idx) == 0:
         return mask
-    pts = xyz[idx]
-    local = pts - pts.min(axis=0)
+    local = xyz[idx]  # a copy (fancy indexing), made local in place
+    local -= local.min(axis=0)
     ext = local.max(axis=0)
     cells = (ext[0] / cell + 1) * (ext[1] / cell + 1)
     if cells > MAX_CELLS:

@@ -131,6 +131,10 @@ def provisional_dtm(
     return SmrfSurface(zpro, spec, kept, arg[kept])
 
 
+POINT_CHUNK = 1_000_000
+"""The final per-point test runs over this many points at a time (its temporaries: ~100 bytes per point)."""
+
+
 def smrf(
     xyz: np.ndarray,
     *,
@@ -147,8 +151,11 @@ def smrf(
     surf = provisional_dtm(
         xyz, cell=cell, slope=slope, window=window, edge_step=edge_step, edge_share=edge_share, advance=advance
     )
-    i, j = cell_index(xyz[:, :2], surf.spec)
     g = gradient_slope(surf.grid, cell)
-    z = bilinear(surf.grid, surf.spec, xyz[:, :2])
-    ground = np.abs(xyz[:, 2] - z) <= threshold + scalar * g[i, j]
+    ground = np.empty(len(xyz), dtype=bool)
+    for a in range(0, len(xyz), POINT_CHUNK):  # bounded temporaries on large clouds
+        part = xyz[a:a + POINT_CHUNK]
+        i, j = cell_index(part[:, :2], surf.spec)
+        z = bilinear(surf.grid, surf.spec, part[:, :2])
+        ground[a:a + POINT_CHUNK] = np.abs(part[:, 2] - z) <= threshold + scalar * g[i, j]
     return ground, surf
