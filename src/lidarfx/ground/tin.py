@@ -101,7 +101,9 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     provably the one of the whole triangulation: the circumcircle of its triangle
     lies inside the triangulated area (so the triangle is Delaunay for all points),
     or, outside the convex hull of all points, the circle through its nearest
-    point does.  Other queries are retried with twice the margin.  The result
+    point does (only the part of a circle inside the extent of all points
+    counts).  Other queries are retried on a larger area that holds the circles
+    they need; the last resort is all points.  The result
     equals the one-piece interpolation, except where four or more known points lie
     on one circle: there both triangulations are valid and may split differently.
     """
