@@ -116,14 +116,14 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
 
 
 def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
-             box: tuple[float, float, float, float] | None = None, outside_all: np.ndarray | None = None,
+             box: tuple[float, float, float, float] | None = None, hull: tuple | None = None,
              extent: tuple[np.ndarray, np.ndarray] | None = None,
              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """One triangulation.  With ``box`` (x0, y0, x1, y1: the area whose known points are all in
     ``xy``) also a mask of the answers that equal the whole triangulation's (see
     :func:`tin_interpolate`) and, per query, the box (x0, y0, x1, y1) an answer would need
     (the bounding box of its circle, cut to ``extent`` = (lo, hi) of all points: no point lies
-    beyond); ``outside_all``: queries outside the hull of all points."""
+    beyond); ``hull``: the convex hull of all points (:func:`_hull_of`)."""
     out = np.full(len(query), np.nan)
     need = np.column_stack([query, query]) if box is not None else None
     if len(xy) == 0 or len(query) == 0:
@@ -191,21 +191,29 @@ def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outs
     inside = (need[:, 0] >= x0) & (need[:, 1] >= y0) & (need[:, 2] <= x1) & (need[:, 3] <= y1)
     ok = np.zeros(len(query), dtype=bool)
     ok[hit] = inside[hit]
-    if outside_all is not None:
-        miss = bad & outside_all
+    if hull is not None and nearest_outside:
+        miss = np.flatnonzero(bad)
+        miss = miss[_outside_hull(hull, query[miss])]  # outside all points: the nearest one decides
         ok[miss] = inside[miss]
     return out, ok, need
 
 
-def _outside_hull(xy: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """Queries strictly outside the convex hull of ``xy`` (all False when the hull is degenerate)."""
+def _hull_of(xy: np.ndarray) -> tuple | None:
+    """Edges (a, b, c: a x + b y + c <= 0 inside) and coordinate scale of the convex hull of ``xy``;
+    None when the hull is degenerate."""
     try:
         hull = ConvexHull(xy)
     except (QhullError, ValueError):
-        return np.zeros(len(query), dtype=bool)
-    eq = hull.equations  # a x + b y + c <= 0 inside
-    scale = float(np.abs(xy).max()) + 1.0
+        return None
+    return hull.equations, float(np.abs(xy).max()) + 1.0
+
+
+def _outside_hull(hull: tuple | None, query: np.ndarray) -> np.ndarray:
+    """Queries strictly outside the hull (all False for a degenerate hull)."""
     out = np.zeros(len(query), dtype=bool)
+    if hull is None or not len(query):
+        return out
+    eq, scale = hull
     for a, b, c in eq:
         out |= a * query[:, 0] + b * query[:, 1] + c > 1e-9 * scale
     return out
@@ -217,7 +225,7 @@ def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_ou
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     area = max(float(np.prod(np.maximum(hi - lo, 1e-9))), 1e-12)
     side = max(float(np.sqrt(area * max_points / (2.0 * len(xy)))), 1e-6)  # ~ max_points/2 known points per tile
-    outside_all = _outside_hull(xy, query) if nearest_outside else np.zeros(len(query), dtype=bool)
+    hull = _hull_of(xy)
     qlo = query.min(axis=0)
     tij = np.floor((query - qlo) / side).astype(np.int64)
     key = tij[:, 0] * (int(tij[:, 1].max()) + 1) + tij[:, 1]
@@ -231,8 +239,7 @@ def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_ou
                 break
             sel = np.flatnonzero((xy[:, 0] >= box[0]) & (xy[:, 0] <= box[2])
                                  & (xy[:, 1] >= box[1]) & (xy[:, 1] <= box[3]))
-            v, ok, need = _tin_one(xy[sel], values[sel], query[todo], nearest_outside, joggle, box, outside_all[todo],
-                                   (lo, hi))
+            v, ok, need = _tin_one(xy[sel], values[sel], query[todo], nearest_outside, joggle, box, hull, (lo, hi))
             out[todo[ok]] = v[ok]
             todo, need = todo[~ok], need[~ok]
             if len(todo):  # the next area: every circle still needed, and more than this one
