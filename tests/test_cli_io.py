@@ -141,6 +141,8 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         (["convert", "{tmp}/a.xyz", "{tmp}/b.las", "--columns", "x,y"], "no column named z"),
         # outputs are checked before any work (the model does not exist: its error would come later)
         (["features", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),
+        (["dtm", "{tmp}/a.xyz", "{tmp}/nodir/d.tif"], "output folder does not exist"),
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.las", "--dtm", "{tmp}/nodir/d.tif"], "output folder does not exist"),
         (["ground", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
         (["segment", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
         (["classify", "predict", "{tmp}/a.xyz", "{tmp}/b.e57", "--model", "{tmp}/none.skops"], "unknown file extension"),

@@ -18,9 +18,7 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     so a failed run never leaves a half-written output behind.
     """
     target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise LidarfxError(f"output folder does not exist: {folder}")
+    folder = check_output_folder(target)
     sfx = suffix if suffix is not None else "".join(target.suffixes[-1:])
     fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{sfx}", dir=folder)
     os.close(fd)
@@ -33,6 +31,17 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
+
+
+def check_output_folder(path: str | os.PathLike) -> Path:
+    """The folder an output file goes to; an error when it does not exist or ``path`` is a folder."""
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise LidarfxError(f"output folder does not exist: {folder}")
+    if target.is_dir():
+        raise LidarfxError(f"{target} is a folder; give an output file name")
+    return folder
 
 
 def _umask() -> int:

@@ -52,11 +52,9 @@ def check_picture_path(path: str) -> None:
     """Refuse a picture path before any work: not a .png, or its folder is missing."""
     from pathlib import Path
 
+    from .._atomic import check_output_folder
     from ..errors import LidarfxError
 
-    p = Path(path)
-    if p.suffix.lower() != ".png":
+    if Path(path).suffix.lower() != ".png":
         raise LidarfxError(f"picture {path}: pictures are PNG files; give a path ending in .png")
-    folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise LidarfxError(f"picture {path}: output folder does not exist: {folder}")
+    check_output_folder(path)

@@ -137,11 +137,13 @@ def register(sub) -> None:
 def _check_raster_path(path: str) -> None:
     from pathlib import Path
 
+    from .._atomic import check_output_folder
     from ..errors import LidarfxError
     from ..ground.raster import RASTER_EXTENSIONS
 
     if Path(path).suffix.lower() not in RASTER_EXTENSIONS:
         raise LidarfxError(f"{path}: DTM output must end in {', '.join(RASTER_EXTENSIONS)}")
+    check_output_folder(path)
 
 
 def run_ground(args) -> int:

@@ -27,7 +27,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .._atomic import atomic_path, check_not_same_file
+from .._atomic import atomic_path, check_not_same_file, check_output_folder
 from ..cloud import PointCloud
 from ..errors import LidarfxError
 from ..progress import bar as _bar
@@ -100,11 +100,7 @@ def check_output_path(path: str | os.PathLike) -> Path:
     """Refuse an output path before any work: unknown extension or a missing folder."""
     p = Path(path)
     _format_module(p)
-    folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise LidarfxError(f"output folder does not exist: {folder}")
-    if p.is_dir():
-        raise LidarfxError(f"{p} is a folder; give an output file name")
+    check_output_folder(p)
     return p
 
 
