@@ -266,6 +266,12 @@ def summarise(name: str, res: dict[str, Any], cmap) -> dict[str, Any]:
     return res
 
 
+def baseline_name(variant: str) -> str:
+    """Report name of a baseline variant ("with z" / "without z")."""
+    return ("baseline: jakteristics 1/2/3 m + z + balanced RF" if variant == "with z"
+            else "baseline: jakteristics 1/2/3 m + balanced RF (no z)")
+
+
 def leave_one_tile_out(train_paths, cmap, args, log) -> int:
     """Both pipelines, each training tile predicted by a model of the other two; pooled."""
     pooled: dict[str, dict[str, Any]] = {}
@@ -275,8 +281,7 @@ def leave_one_tile_out(train_paths, cmap, args, log) -> int:
         runs = {"lidarfx default (hgb)": lidarfx_default(rest, [held], cmap, args.seed, log)}
         if not args.skip_baseline:
             for k, v in baseline(rest, [held], cmap, args.seed, log).items():
-                runs[f"baseline: jakteristics 1/2/3 m {'+ z ' if k == 'with z' else ''}+ balanced RF"
-                     + ("" if k == "with z" else " (no z)")] = v
+                runs[baseline_name(k)] = v
         for name, r in runs.items():
             acc = pooled.setdefault(name, {"confusion": {}, "seconds": {}, "features": r["features"],
                                            "train_points": 0})
@@ -351,8 +356,7 @@ def main(argv: list[str] | None = None) -> int:
         l0 = load()
         res = fn()
         l1 = load()
-        parts = {f"baseline: jakteristics 1/2/3 m {'+ z ' if k == 'with z' else ''}+ balanced RF"
-                 + ("" if k == "with z" else " (no z)"): v for k, v in res.items()} if name == "baseline" else {name: res}
+        parts = {baseline_name(k): v for k, v in res.items()} if name == "baseline" else {name: res}
         for n2, r2 in parts.items():
             r2["load_before"], r2["load_after"] = l0, l1
             results[n2] = summarise(n2, r2, cmap)
@@ -365,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, r in results.items():
         print(f"{name:<52} {r['metrics']['oa']:>7.4f} {r['metrics']['mean_f1']:>8.4f} {r['seconds']['total']:>8.1f}")
     print(f"accuracy target OA >= {TARGET_OA}, mean F1 >= {TARGET_F1}: {'PASS' if ok_acc else 'FAIL'}")
-    base_name = "baseline: jakteristics 1/2/3 m + z + balanced RF"
+    base_name = baseline_name("with z")
     if base_name in results:
         ratio = lf["seconds"]["total"] / results[base_name]["seconds"]["total"]
         out["time_ratio"] = ratio
