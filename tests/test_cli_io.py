@@ -148,6 +148,9 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         (["classify", "predict", "{tmp}/a.xyz", "{tmp}/b.e57", "--model", "{tmp}/none.skops"], "unknown file extension"),
         (["classify", "predict", "{tmp}/a.xyz", "{tmp}/nodir/b.laz", "--model", "{tmp}/none.skops"],
          "output folder does not exist"),
+        # a.xyz has no classes: training would fail later with another message
+        (["classify", "train", "{tmp}/a.xyz", "--model", "{tmp}/nodir/m.skops"], "output folder does not exist"),
+        (["classify", "evaluate", "{tmp}/a.xyz", "--out", "{tmp}/a.xyz"], "exists and is not a folder"),
     ],
 )
 def test_cli_errors_in_process(tmp_path, capsys, argv, message):

@@ -241,11 +241,13 @@ def _ignore(args):
 
 
 def run_train(args) -> int:
+    from .._atomic import check_output_folder
     from ..classify import train
     from ..errors import LidarfxError
 
     if not str(args.model).lower().endswith(".skops"):
         raise LidarfxError(f"model file should end in .skops, got {args.model}")
+    check_output_folder(args.model)  # before the training, not after it
     say = _log(args)
     t0 = time.perf_counter()
     model = train(args.files, classes=args.classes, ignore=_ignore(args), config=_config(args), log=say)
@@ -352,10 +354,12 @@ def model_table(m: dict):
 
 def run_evaluate(args) -> int:
     from ..classify import evaluate, evaluate_model, format_report, load_model, write_report
-    from ..classify.evaluate import report_json
+    from ..classify.evaluate import _out_dir, report_json
     from ..errors import LidarfxError
 
     say = _log(args)
+    if args.out:
+        _out_dir(args.out, create=False)  # a file in the way fails before the work
     if args.model:
         if args.test or args.cv or args.leave_one_out:
             raise LidarfxError("--model evaluates a trained model on FILES; it does not take --cv/--test/--leave-one-out")
