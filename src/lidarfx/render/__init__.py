@@ -24,6 +24,13 @@ def _save(fig, path: str | Path, dpi: int) -> Path:
     return Path(path)
 
 
+def _label_axes(ax, xlabel: str = "x (East) [m]", ylabel: str = "y (North) [m]") -> None:
+    """Axis labels and tick size of a map panel (plan view by default)."""
+    ax.set_xlabel(xlabel, fontsize=8)
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.tick_params(labelsize=7)
+
+
 def _view_axes(view: str) -> tuple[int, int, str, str]:
     views = {"top": (0, 1, "x (East) [m]", "y (North) [m]"), "front": (0, 2, "x [m]", "z [m]"), "side": (1, 2, "y [m]", "z [m]")}
     return views[view]
@@ -175,9 +182,7 @@ def class_map(
         handles.append(plt.Line2D([], [], marker="s", ls="", color=NOT_CLASSIFIED, label=f"not classified: {rest:,}"))
     ax.legend(handles=handles, fontsize=7, loc="upper right", title="class of the highest point (points)",
               title_fontsize=7)
-    ax.set_xlabel("x (East) [m]", fontsize=8)
-    ax.set_ylabel("y (North) [m]", fontsize=8)
-    ax.tick_params(labelsize=7)
+    _label_axes(ax)
     if title:
         ax.set_title(title, fontsize=9)
     return _save(fig, path, dpi)
@@ -283,9 +288,7 @@ def error_map(
                           (axes[0, 1], im["right"], "errors: reference → predicted (dominant per cell)")):
         ax.imshow(img, origin="lower", interpolation="nearest", extent=extent)
         ax.set_title(head, fontsize=9)
-        ax.set_xlabel("x (East) [m]", fontsize=8)
-        ax.set_ylabel("y (North) [m]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        _label_axes(ax)
     axes[0, 0].legend(handles=[plt.Line2D([], [], marker="s", ls="", color=c, label=str(n))
                                for c, n in zip(im["class_colours"], class_names)], fontsize=7, loc="upper right")
     handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=f"{lab}: {n:,}")
@@ -372,9 +375,7 @@ def segment_view(
     ax = axes[0, npan - 1]
     ax.imshow(img, origin="lower", interpolation="nearest", extent=extent)
     for ax in axes[0]:
-        ax.set_xlabel(xl, fontsize=8)
-        ax.set_ylabel(yl, fontsize=8)
-        ax.tick_params(labelsize=7)
+        _label_axes(ax, xl, yl)
     if title:
         axes[0, npan - 1].set_title(title, fontsize=9)
     return _save(fig, path, dpi)
