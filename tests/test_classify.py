@@ -148,6 +148,52 @@ def test_block_folds_keep_blocks_whole_random_folds_do_not():
         block_folds(xy, 3, -1.0)
 
 
+@pytest.mark.parametrize("buffer", [0.7, 3.0, 12.5])  # below, at and above the block size (reach 1 and 2)
+def test_block_buffer_mask_is_the_distance_to_other_folds_blocks(buffer):
+    from lidarfx.classify.evaluate import block_buffer_mask
+
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(0, 60, (3000, 2))
+    groups = rng.integers(0, 2, len(xy))
+    folds, blocks = block_folds(xy, 3, 10.0, seed=0, groups=groups)
+    near = block_buffer_mask(xy, folds, 10.0, buffer, groups)
+    # brute force: the distance of every point to every block square of another fold in its own file
+    bx, by = np.floor(xy / 10.0).T
+    want = np.zeros_like(near)
+    for b in np.unique(blocks):
+        m = blocks == b
+        x0, y0, f, grp = bx[m][0] * 10.0, by[m][0] * 10.0, folds[m][0], groups[m][0]
+        d = np.hypot(np.maximum(0, np.maximum(x0 - xy[:, 0], xy[:, 0] - x0 - 10.0)),
+                     np.maximum(0, np.maximum(y0 - xy[:, 1], xy[:, 1] - y0 - 10.0)))
+        want[f] |= (d < buffer) & (folds != f) & (groups == grp)
+    np.testing.assert_array_equal(near, want)
+    assert near.any() and not near[folds, np.arange(len(xy))].any()  # never the own fold
+    assert not block_buffer_mask(xy, folds, 10.0, 0.0, groups).any()
+
+
+def test_cross_validate_leaves_the_buffer_out_of_training():
+    from lidarfx.classify.evaluate import block_buffer_mask, cross_validate
+
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, 80, (4000, 2))
+    y = (xy[:, 0] > 40).astype(np.int64) + (xy[:, 1] > 40)  # three classes by place
+    X = np.column_stack([np.arange(len(xy)), xy, rng.normal(size=len(xy))]).astype(np.float32)
+    folds, _ = block_folds(xy, 3, 10.0, seed=0)
+    near = block_buffer_mask(xy, folds, 10.0, 2.0)
+    cfg = TrainConfig(features="planarity", radii=[1.0], classifier="nb", max_per_class=None,
+                      terrain_augment=0)
+    seen = []
+    fit = cfg.fit_matrix
+    cfg.fit_matrix = lambda Xf, yf: (seen.append(Xf[:, 0].astype(np.int64)), fit(Xf, yf))[1]
+    cm, per_fold, _ = cross_validate(X, y, folds, cfg, 3, exclude=near)
+    assert cm.sum() == len(y)  # every point is tested once
+    for f, rows, pf in zip(range(3), seen, per_fold):
+        assert not near[f, rows].any() and not (folds[rows] == f).any()
+        want = int((near[f] & (folds != f)).sum())
+        assert pf["buffer_excluded"] == want > 0
+        assert pf["train_points"] == int((folds != f).sum()) - want
+
+
 def test_random_folds_are_stratified():
     y = np.repeat([0, 1, 2], [300, 60, 30])
     f = random_folds(len(y), 3, seed=0, y=y)
@@ -421,7 +467,11 @@ def test_evaluate_random_vs_blocks_and_report(tmp_path, facades):
     assert js["sections"]["cv_blocks"]["metrics"]["confusion"] == bl["confusion"]
     assert (tmp_path / "rep" / "confusion_cv_blocks.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     txt = (tmp_path / "rep" / "report.txt").read_text()
-    assert "rows = reference, columns = predicted" in txt and "spatial blocks of 4 m" in txt
+    assert "rows = reference, columns = predicted" in txt and "spatial blocks of 4 m, buffer 1 m" in txt
+    # the default buffer is twice the largest radius (0.5 m); every block fold left points out
+    assert sec["cv_blocks"]["buffer"] == 1.0
+    assert all(pf["buffer_excluded"] > 0 for pf in sec["cv_blocks"]["folds"])
+    assert "buffer_excluded" not in sec["cv_random"]["folds"][0]
 
 
 def test_importance_and_backward_elimination(facades):

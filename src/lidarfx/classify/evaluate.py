@@ -42,7 +42,7 @@ from .model import (
 from .fastpredict import predict as fast_predict
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
-__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "cross_validate",
+__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask", "cross_validate",
            "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
 
 LAYOUT = "rows = reference, columns = predicted"
@@ -162,23 +162,87 @@ def block_folds(xy: np.ndarray, n_folds: int, block_size: float, seed: int = 0,
     return fold_of_block[block], block
 
 
+def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buffer: float,
+                 groups: np.ndarray | None = None) -> np.ndarray:
+    """Points near another fold's blocks: ``near[f, i]`` is True when point ``i`` lies within
+    ``buffer`` m (plan distance) of a block of :func:`block_folds` that belongs to fold ``f``
+    and not to the point's own fold.  Cross-validation leaves such points out of fold ``f``'s
+    training part (a buffered spatial-block CV), so that no training point lies within
+    ``buffer`` of the held-out area.  The distance is to the block's square, not to its
+    points; ``groups`` (file ids) as in :func:`block_folds`."""
+    xy = np.asarray(xy, dtype=np.float64)
+    folds = np.asarray(folds, dtype=np.int64)
+    n_folds = int(folds.max()) + 1 if len(folds) else 0
+    near = np.zeros((n_folds, len(xy)), dtype=bool)
+    if not (buffer > 0) or not len(xy):
+        return near
+    if not math.isfinite(buffer):
+        raise LidarfxError(f"block buffer must be a finite number of metres, got {buffer!r}")
+    s = float(block_size)
+    bx = np.floor(xy[:, 0] / s).astype(np.int64)
+    by = np.floor(xy[:, 1] / s).astype(np.int64)
+    ox, oy = xy[:, 0] - bx * s, xy[:, 1] - by * s  # offsets inside the own block, 0..s
+    g = np.zeros(len(xy), np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
+    reach = math.ceil(buffer / s)
+    bx, by = bx - bx.min() + reach, by - by.min() + reach
+    w, h = int(bx.max()) + reach + 1, int(by.max()) + reach + 1
+    key = (g * w + bx) * h + by
+    ukey, first = np.unique(key, return_index=True)
+    ufold = folds[first]  # a block lies in one fold (block_folds never splits one)
+    for dx in range(-reach, reach + 1):
+        gx = 0.0 if dx == 0 else ((dx - 1) * s + (s - ox) if dx > 0 else (-dx - 1) * s + ox)
+        for dy in range(-reach, reach + 1):
+            if dx == 0 and dy == 0:
+                continue
+            gy = 0.0 if dy == 0 else ((dy - 1) * s + (s - oy) if dy > 0 else (-dy - 1) * s + oy)
+            idx = np.flatnonzero(np.hypot(gx, gy) < buffer)
+            if not len(idx):
+                continue
+            k2 = (g[idx] * w + bx[idx] + dx) * h + by[idx] + dy
+            pos = np.minimum(np.searchsorted(ukey, k2), len(ukey) - 1)
+            hit = ukey[pos] == k2
+            f2, i2 = ufold[pos[hit]], idx[hit]
+            other = f2 != folds[i2]
+            near[f2[other], i2[other]] = True
+    return near
+
+
+def default_block_buffer(config: TrainConfig) -> float:
+    """The default buffer of the spatial-block CV: twice the largest radius (no training
+    point's neighbourhood then holds a point of a held-out point's), 0 for k-NN."""
+    if config.neighbourhood == "knn" or not config.radii:
+        return 0.0
+    return 2.0 * max(config.radii)
+
+
+def fold_parts(folds: np.ndarray, y: np.ndarray, f: int, exclude: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Training and held-out indices of fold ``f`` (labelled points only); ``exclude``
+    (:func:`block_buffer_mask`) removes the points near the held-out blocks from the training part."""
+    train = (folds != f) & (y >= 0)
+    if exclude is not None:
+        train &= ~exclude[f]
+    return np.flatnonzero(train), np.flatnonzero((folds == f) & (y >= 0))
+
+
 def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: TrainConfig, n_classes: int,
-                   log: Callable[[str], None] | None = None, X_aug: Sequence[np.ndarray] = ()
+                   log: Callable[[str], None] | None = None, X_aug: Sequence[np.ndarray] = (),
+                   exclude: np.ndarray | None = None,
                    ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
     """Train on all folds but one (balanced sample, as :func:`train` does), predict the
     held-out fold, for every fold.  ``X_aug``: features of the same points in
     terrain-sheared copies, or ``(Xa, rows)`` pairs for copies holding only some of
     the points (thinned copies: row ``j`` of ``Xa`` is point ``rows[j]``); the
     training part of each fold adds a balanced sample of them like :func:`train`.
-    Returns the summed confusion matrix, per-fold results and the fitted
-    estimators with their held-out indices."""
+    ``exclude``: ``(n_folds, n)`` bool, points left out of fold ``f``'s training part
+    (:func:`block_buffer_mask`).  Returns the summed confusion matrix, per-fold results and
+    the fitted estimators with their held-out indices."""
     from .model import _aug_cap
 
     cm = np.zeros((n_classes, n_classes), np.int64)
     per_fold, fitted = [], []
     for f in np.unique(folds):
-        tr = np.flatnonzero((folds != f) & (y >= 0))
-        te = np.flatnonzero((folds == f) & (y >= 0))
+        tr, te = fold_parts(folds, y, int(f), exclude)
         if not len(te):
             continue
         s = tr[balanced_sample(y[tr], config.max_per_class, config.seed)]
@@ -187,7 +251,10 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
         for a, Xa in enumerate(X_aug):
             if isinstance(Xa, tuple):  # a copy with a subset of the points
                 Xa, rows = Xa
-                ok = np.flatnonzero((folds[rows] != f) & (y[rows] >= 0))
+                ok = (folds[rows] != f) & (y[rows] >= 0)
+                if exclude is not None:
+                    ok &= ~exclude[f][rows]
+                ok = np.flatnonzero(ok)
                 pick = ok[balanced_sample(y[rows[ok]], _aug_cap(config), config.seed + 1 + a)]
                 Xf, yf = np.vstack([Xf, Xa[pick]]), np.concatenate([yf, y[rows[pick]]])
                 continue
@@ -198,10 +265,11 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
         c = confusion_matrix(y[te], pred, n_classes)
         cm += c
         m = metrics(c)
-        per_fold.append({"fold": int(f), "train_points": int(len(s)), "test_points": int(len(te)),
+        per_fold.append({"fold": int(f), "train_points": int(len(yf)), "test_points": int(len(te)),
                          "oa": m["oa"], "kappa": m["kappa"], "mean_f1": m["mean_f1"],
                          "seconds": round(time.perf_counter() - t0, 3)})
-        per_fold[-1]["train_points"] = int(len(yf))
+        if exclude is not None:
+            per_fold[-1]["buffer_excluded"] = int((exclude[f] & (folds != f) & (y >= 0)).sum())
         fitted.append((est, te))
         if log:
             log(f"  fold {int(f)}: train {len(s):,} / test {len(te):,} points, OA {m['oa']:.4f}, "
@@ -314,6 +382,7 @@ def evaluate(
     test: Any = None,
     cv: int | None = 3,
     block_size: float | None = 20.0,
+    block_buffer: float | None = None,
     random_cv: bool = True,
     leave_one_out: bool = False,
     classes: Any = None,
@@ -335,7 +404,11 @@ def evaluate(
       (when ``random_cv``); neighbouring points fall into different folds, so it
       is optimistic.
     * ``cv_blocks`` — ``cv``-fold cross-validation with spatial blocks of
-      ``block_size`` m (when ``block_size``).
+      ``block_size`` m (when ``block_size``), buffered: training points within
+      ``block_buffer`` m of a held-out block are left out of that fold's training
+      (default ``None``: twice the largest radius, so that no training point's
+      neighbourhood shares a point with a held-out point's; 0 for k-NN
+      neighbourhoods, which have no fixed size; ``0`` = no buffer).
     * ``leave_one_file_out`` — train on all files but one, test on it (when
       ``leave_one_out`` and ≥ 2 files).
     * ``test`` — train on all ``sources``, test on the ``test`` files (per file
@@ -355,6 +428,9 @@ def evaluate(
     cfg = config or TrainConfig(**params)
     if config is not None and params:
         raise LidarfxError("give either config= or keyword parameters, not both")
+    buf = default_block_buffer(cfg) if block_buffer is None else float(block_buffer)
+    if not (buf >= 0 and math.isfinite(buf)):
+        raise LidarfxError(f"block buffer must be a number of metres >= 0, got {block_buffer!r}")
     t_all = time.perf_counter()
     srcs = read_sources(sources, progress=progress)
     cmap = resolve_classes(srcs, classes, ignore)
@@ -385,10 +461,13 @@ def evaluate(
         if cv and random_cv:
             runs.append(("cv_random", f"{cv}-fold CV, random folds (stratified by class)",
                          random_folds(len(y), int(cv), cv_seed, y), {}))
+        near = None
         if cv and block_size:
             fb, blocks = block_folds(xy, int(cv), float(block_size), cv_seed, g)
-            runs.append(("cv_blocks", f"{cv}-fold CV, spatial blocks of {float(block_size):g} m",
-                         fb, {"block_size": float(block_size), "blocks": int(blocks.max() + 1)}))
+            near = block_buffer_mask(xy, fb, float(block_size), buf, g) if buf > 0 else None
+            title = f"{cv}-fold CV, spatial blocks of {float(block_size):g} m"
+            runs.append(("cv_blocks", title + (f", buffer {buf:g} m" if buf > 0 else ""),
+                         fb, {"block_size": float(block_size), "blocks": int(blocks.max() + 1), "buffer": buf}))
         if leave_one_out and len(srcs) > 1:
             runs.append(("leave_one_file_out", "leave one file out (train on the others)", g,
                          {"files": [s.name for s in srcs]}))
@@ -396,7 +475,8 @@ def evaluate(
         for key, title, folds, extra in runs:
             t0 = time.perf_counter()
             say(f"{title}:")
-            cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug)
+            cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug,
+                                                  exclude=near if key == "cv_blocks" else None)
             if key == "leave_one_file_out":
                 for pf in per_fold:
                     pf["file"] = srcs[pf["fold"]].name
@@ -425,10 +505,12 @@ def evaluate(
             from .importance import backward_elimination
 
             t0 = time.perf_counter()
-            folds = next((r[2] for r in runs if r[0] == "cv_blocks"), runs[0][2])
+            blocks_run = next((r for r in runs if r[0] == "cv_blocks"), None)
+            folds = blocks_run[2] if blocks_run else runs[0][2]
             say("backward elimination (random forest, 50 trees):")
             report["backward_elimination"] = backward_elimination(
-                X, y, cfg.feature_names(), folds, max_per_class=cfg.max_per_class, seed=cfg.seed, log=say)
+                X, y, cfg.feature_names(), folds, max_per_class=cfg.max_per_class, seed=cfg.seed, log=say,
+                exclude=near if blocks_run else None)
             report["seconds"]["backward_elimination"] = round(time.perf_counter() - t0, 3)
     if test is not None:
         t0 = time.perf_counter()
@@ -480,11 +562,16 @@ def format_report(report: dict[str, Any]) -> str:
     for key, sec in report["sections"].items():
         out.append(f"== {sec['title']} [{key}] ==")
         if "block_size" in sec:
-            out.append(f"{sec['blocks']} blocks of {sec['block_size']:g} m")
+            line = f"{sec['blocks']} blocks of {sec['block_size']:g} m"
+            if sec.get("buffer"):
+                line += (f"; training points within {sec['buffer']:g} m of a held-out block are left out of "
+                         "that fold's training")
+            out.append(line)
         for pf in sec.get("folds", []):
             label = Path(pf["file"]).name if "file" in pf else f"fold {pf['fold']}"
+            left = f", {pf['buffer_excluded']:,} training points in the buffer" if pf.get("buffer_excluded") else ""
             out.append(f"  {label}: test {pf['test_points']:,} points, OA {_f(pf['oa'])}, "
-                       f"mean F1 {_f(pf['mean_f1'])}")
+                       f"mean F1 {_f(pf['mean_f1'])}{left}")
         if key == "test":
             for name, m in sec["files"].items():
                 d = m.get("density")

@@ -100,6 +100,7 @@ def backward_elimination(
     max_per_class: int | None = 10_000,
     seed: int = 0,
     log: Callable[[str], None] | None = None,
+    exclude: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Backward feature elimination with a random forest (Chehata et al. 2009).
 
@@ -107,7 +108,9 @@ def backward_elimination(
     ``folds`` (e.g. spatial-block folds from
     :func:`lidarfx.classify.block_folds`), record OA and mean F1, then drop the
     ``max(1, step · n)`` features with the lowest impurity importance (forest
-    trained on all folds).  Stops at ``min_features``.
+    trained on all folds).  Stops at ``min_features``.  ``exclude``: points left
+    out of each fold's training part (a buffered block CV,
+    :func:`lidarfx.classify.evaluate.block_buffer_mask`).
 
     Returns ``{"steps": [{"n_features", "oa", "mean_f1", "features", "removed"}...],
     "best": <the smallest step whose mean F1 is within tolerance of the best>}``.
@@ -115,7 +118,7 @@ def backward_elimination(
     from sklearn.ensemble import RandomForestClassifier
     from sklearn.utils.class_weight import compute_sample_weight
 
-    from .evaluate import confusion_matrix, metrics
+    from .evaluate import confusion_matrix, fold_parts, metrics
     from .pipeline import balanced_sample
 
     X = np.asarray(X, dtype=np.float32)
@@ -135,8 +138,7 @@ def backward_elimination(
     while True:
         cm = np.zeros((k, k), np.int64)
         for f in np.unique(folds):
-            tr = np.flatnonzero((folds != f) & (y >= 0))
-            te = np.flatnonzero((folds == f) & (y >= 0))
+            tr, te = fold_parts(folds, y, int(f), exclude)
             s = tr[balanced_sample(y[tr], max_per_class, seed)]
             clf = forest().fit(X[np.ix_(s, current)], y[s], sample_weight=compute_sample_weight("balanced", y[s]))
             cm += confusion_matrix(y[te], clf.predict(X[np.ix_(te, current)]), k)
