@@ -193,7 +193,8 @@ def facade_experiment(seed: int, max_per_class: int, log) -> list[dict[str, Any]
 
     Three facade scenes (seeds 1, 2, 3; ~90 000 points each, like Lang's three scenes of
     ~70 000).  Per configuration: 3-fold CV with random folds (Lang's M-fold
-    cross-validation), 3-fold CV with spatial blocks of 4 m, scene transfer
+    cross-validation), 3-fold CV with spatial blocks of 4 m (buffered: twice the largest
+    radius, the default of ``evaluate``), scene transfer
     (train on scene 1, test on scenes 2 and 3: same house, new sampling, vegetation
     and clutter) and transfer to a taller house (train on scene 1, test on a
     three-storey house with 10 m walls — Lang's §3.2 situation: wall points above

@@ -8,7 +8,7 @@ Public API
 :class:`LidarFeatures`         scikit-learn transformer: clouds → feature matrix
 :func:`make_pipeline`          ``Pipeline(LidarFeatures → impute → classifier)``
 :class:`ClassMap`              class merging / ignoring (``"2,3+4+5,6"``)
-:func:`evaluate`               CV (random and spatial-block folds), leave-one-file-out, transfer
+:func:`evaluate`               CV (random and buffered spatial-block folds), leave-one-file-out, transfer
 :func:`metrics`                OA, kappa, PA, UA, F1, IoU from a confusion matrix
 
 See ``docs/classification.md``.
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from .classes import ASPRS_NAMES, DEFAULT_IGNORE, ClassMap
 from .evaluate import (
+    block_buffer_mask,
     block_folds,
     confusion_matrix,
     evaluate,
@@ -44,7 +45,7 @@ from .pipeline import (
 
 __all__ = [
     "ASPRS_NAMES", "DEFAULT_IGNORE", "ClassMap",
-    "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "format_report", "metrics",
+    "block_buffer_mask", "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "format_report", "metrics",
     "plot_confusion", "random_folds", "write_report",
     "backward_elimination", "impurity_importance", "permutation_importance",
     "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",

@@ -42,8 +42,8 @@ from .model import (
 from .fastpredict import predict as fast_predict
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
-__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask", "cross_validate",
-           "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
+__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask",
+           "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
 
 LAYOUT = "rows = reference, columns = predicted"
 
@@ -163,7 +163,7 @@ def block_folds(xy: np.ndarray, n_folds: int, block_size: float, seed: int = 0,
 
 
 def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buffer: float,
-                 groups: np.ndarray | None = None) -> np.ndarray:
+                      groups: np.ndarray | None = None) -> np.ndarray:
     """Points near another fold's blocks: ``near[f, i]`` is True when point ``i`` lies within
     ``buffer`` m (plan distance) of a block of :func:`block_folds` that belongs to fold ``f``
     and not to the point's own fold.  Cross-validation leaves such points out of fold ``f``'s
