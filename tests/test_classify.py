@@ -474,6 +474,19 @@ def test_evaluate_random_vs_blocks_and_report(tmp_path, facades):
     assert "buffer_excluded" not in sec["cv_random"]["folds"][0]
 
 
+def test_evaluate_checks_the_folds_before_the_features(facades, monkeypatch):
+    import sys
+
+    E = sys.modules["lidarfx.classify.evaluate"]  # the package's `evaluate` is the function
+
+    def no_features(*a, **k):
+        raise AssertionError("features computed before the fold check")
+
+    monkeypatch.setattr(E, "_file_features", no_features)
+    with pytest.raises(LidarfxError, match="spatial block"):
+        evaluate([facades[0]], classes=FACADE6, cv=5, block_size=1000.0, **SMALL)  # 4 blocks (x, y straddle 0)
+
+
 def test_importance_and_backward_elimination(facades):
     a, _ = facades
     cmap = ClassMap.parse("2,5,6,64")

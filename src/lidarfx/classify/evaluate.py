@@ -278,19 +278,27 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
 
 
 # --------------------------------------------------------------------------- evaluation
+def _labelled(sources: list[Source], cmap: ClassMap
+              ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
+    """Indices (per source), labels, xy (metres) and file id of every labelled point of every source."""
+    idxs, ys, xys, gs = [], [], [], []
+    for i, s in enumerate(sources):
+        y = _labels(s, cmap)
+        idx = np.flatnonzero(y >= 0)
+        idxs.append(idx)
+        ys.append(y[idx])
+        xys.append(s.cloud.xyz[idx, :2] * unit_to_metre(s.cloud))  # blocks in metres
+        gs.append(np.full(len(idx), i, np.int64))
+    return idxs, np.concatenate(ys).astype(np.int64), np.vstack(xys), np.concatenate(gs)
+
+
 def _file_features(sources: list[Source], cmap: ClassMap, config: TrainConfig, progress: bool | None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Features, labels, xy and file id of every labelled point of every source."""
     tr = config.transformer(progress=progress)
-    Xs, ys, xys, gs = [], [], [], []
-    for i, s in enumerate(sources):
-        y = _labels(s, cmap)
-        idx = np.flatnonzero(y >= 0)
-        Xs.append(tr.transform(CloudSample(s.cloud, idx)))
-        ys.append(y[idx])
-        xys.append(s.cloud.xyz[idx, :2] * unit_to_metre(s.cloud))  # blocks in metres
-        gs.append(np.full(len(idx), i, np.int64))
-    return np.vstack(Xs), np.concatenate(ys).astype(np.int64), np.vstack(xys), np.concatenate(gs)
+    idxs, y, xy, g = _labelled(sources, cmap)
+    X = np.vstack([tr.transform(CloudSample(s.cloud, idx)) for s, idx in zip(sources, idxs)])
+    return X, y, xy, g
 
 
 def _thinned_features(sources: list[Source], copies: list[tuple[Source, np.ndarray]], cmap: ClassMap,
@@ -451,12 +459,7 @@ def evaluate(
     if (importance or eliminate) and not need_cv:
         raise LidarfxError("feature importance and backward elimination need cross-validation (cv >= 2)")
     if need_cv:
-        t0 = time.perf_counter()
-        X, y, xy, g = _file_features(srcs, cmap, cfg, progress)
-        X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
-        X_aug += [_thinned_features(srcs, copies, cmap, cfg, progress) for copies in thinned_sources(srcs, cfg)]
-        report["seconds"]["cv_features"] = round(time.perf_counter() - t0, 3)
-        say(f"features of {len(y):,} labelled points: {X.shape[1]} columns, {time.perf_counter() - t0:.1f} s")
+        _, y, xy, g = _labelled(srcs, cmap)  # the folds first: a bad fold setting fails before the features
         runs = []
         if cv and random_cv:
             runs.append(("cv_random", f"{cv}-fold CV, random folds (stratified by class)",
@@ -471,6 +474,12 @@ def evaluate(
         if leave_one_out and len(srcs) > 1:
             runs.append(("leave_one_file_out", "leave one file out (train on the others)", g,
                          {"files": [s.name for s in srcs]}))
+        t0 = time.perf_counter()
+        X = _file_features(srcs, cmap, cfg, progress)[0]
+        X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
+        X_aug += [_thinned_features(srcs, copies, cmap, cfg, progress) for copies in thinned_sources(srcs, cfg)]
+        report["seconds"]["cv_features"] = round(time.perf_counter() - t0, 3)
+        say(f"features of {len(y):,} labelled points: {X.shape[1]} columns, {time.perf_counter() - t0:.1f} s")
         fitted_blocks = None
         for key, title, folds, extra in runs:
             t0 = time.perf_counter()
