@@ -171,6 +171,22 @@ def test_block_buffer_mask_is_the_distance_to_other_folds_blocks(buffer):
     assert not block_buffer_mask(xy, folds, 10.0, 0.0, groups).any()
 
 
+def test_file_buffer_mask_is_the_distance_to_the_held_out_files_points():
+    from lidarfx.classify import file_buffer_mask
+
+    rng = np.random.default_rng(4)
+    xy = np.vstack([rng.uniform(0, 10, (300, 2)), rng.uniform(0, 10, (300, 2)) + [10.0, 0.0],
+                    rng.uniform(0, 10, (300, 2)) + [40.0, 0.0]])  # two adjacent tiles and a far one
+    files = np.repeat([0, 1, 2], 300)
+    near = file_buffer_mask(xy, files, 1.5)
+    d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))  # all pairwise distances
+    for f in range(3):
+        want = (d[:, files == f] < 1.5).any(axis=1) & (files != f)
+        np.testing.assert_array_equal(near[f], want)
+    assert near[0].any() and near[1].any() and not near[2].any() and not near[:, files == 2].any()
+    assert not file_buffer_mask(xy, files, 0.0).any()
+
+
 def test_cross_validate_leaves_the_buffer_out_of_training():
     from lidarfx.classify.evaluate import block_buffer_mask, cross_validate
 
@@ -450,8 +466,11 @@ def test_evaluate_random_vs_blocks_and_report(tmp_path, facades):
     from lidarfx.classify import write_report
 
     a, b = facades
+    # the two scenes are scans of the same house: a buffer around one would leave no training in the other
+    with pytest.raises(LidarfxError, match="the files overlap"):
+        evaluate([a, b], cv=None, leave_one_out=True, classes=FACADE6, **SMALL)
     rep = evaluate([a, b], test=[b], cv=3, block_size=4.0, leave_one_out=True, classes=FACADE6,
-                   classifier="rf", n_estimators=20, importance=True, **SMALL)
+                   classifier="rf", n_estimators=20, importance=True, buffer=0, **SMALL)
     sec = rep["sections"]
     assert set(sec) == {"cv_random", "cv_blocks", "leave_one_file_out", "test"}
     r, bl = sec["cv_random"]["metrics"], sec["cv_blocks"]["metrics"]
@@ -467,11 +486,33 @@ def test_evaluate_random_vs_blocks_and_report(tmp_path, facades):
     assert js["sections"]["cv_blocks"]["metrics"]["confusion"] == bl["confusion"]
     assert (tmp_path / "rep" / "confusion_cv_blocks.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     txt = (tmp_path / "rep" / "report.txt").read_text()
-    assert "rows = reference, columns = predicted" in txt and "spatial blocks of 4 m, buffer 1 m" in txt
-    # the default buffer is twice the largest radius (0.5 m); every block fold left points out
-    assert sec["cv_blocks"]["buffer"] == 1.0
-    assert all(pf["buffer_excluded"] > 0 for pf in sec["cv_blocks"]["folds"])
-    assert "buffer_excluded" not in sec["cv_random"]["folds"][0]
+    assert "rows = reference, columns = predicted" in txt and "spatial blocks of 4 m" in txt
+    assert sec["cv_blocks"]["buffer"] == 0 and "buffer_excluded" not in sec["cv_blocks"]["folds"][0]
+
+
+def test_evaluate_buffers_blocks_and_neighbouring_files(facades):
+    from scipy.spatial import cKDTree
+
+    a, _ = facades
+    west, east = a.subset(a.x < 6.0), a.subset(a.x >= 6.0)  # two adjacent "tiles"
+    rep = evaluate([west, east], cv=3, block_size=4.0, random_cv=False, leave_one_out=True, classes=FACADE6,
+                   classifier="nb", **SMALL)
+    bl, lo = rep["sections"]["cv_blocks"], rep["sections"]["leave_one_file_out"]
+    # the default buffer is twice the largest radius (0.5 m)
+    assert bl["buffer"] == lo["buffer"] == 1.0 and "buffer 1 m" in bl["title"] and "buffer 1 m" in lo["title"]
+    assert all(pf["buffer_excluded"] > 0 for pf in bl["folds"])
+    # leave one file out drops the other tile's strip within 1 m of the held-out tile
+    cmap = ClassMap.parse(FACADE6)
+    usable = [np.flatnonzero(cmap.index_of(c["classification"]) >= 0) for c in (west, east)]
+    for pf, held, other in ((lo["folds"][0], west, east), (lo["folds"][1], east, west)):
+        i_h = usable[0] if held is west else usable[1]
+        i_o = usable[1] if held is west else usable[0]
+        d, _ = cKDTree(held.xyz[i_h, :2]).query(other.xyz[i_o, :2])
+        assert pf["buffer_excluded"] == int((d < 1.0).sum()) > 0
+    from lidarfx.classify import format_report
+
+    txt = format_report(rep)
+    assert "training points within 1 m of the held-out file are left out" in txt
 
 
 def test_evaluate_checks_the_folds_before_the_features(facades, monkeypatch):

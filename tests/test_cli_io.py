@@ -151,7 +151,7 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         # a.xyz has no classes: training would fail later with another message
         (["classify", "train", "{tmp}/a.xyz", "--model", "{tmp}/nodir/m.skops"], "output folder does not exist"),
         (["classify", "evaluate", "{tmp}/a.xyz", "--out", "{tmp}/a.xyz"], "exists and is not a folder"),
-        (["classify", "evaluate", "{tmp}/a.xyz", "--block-buffer", "-1"], "block buffer must be"),
+        (["classify", "evaluate", "{tmp}/a.xyz", "--buffer", "-1"], "buffer must be a number of metres"),
     ],
 )
 def test_cli_errors_in_process(tmp_path, capsys, argv, message):

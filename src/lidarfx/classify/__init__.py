@@ -19,6 +19,7 @@ from .classes import ASPRS_NAMES, DEFAULT_IGNORE, ClassMap
 from .evaluate import (
     block_buffer_mask,
     block_folds,
+    file_buffer_mask,
     confusion_matrix,
     evaluate,
     evaluate_model,
@@ -45,7 +46,8 @@ from .pipeline import (
 
 __all__ = [
     "ASPRS_NAMES", "DEFAULT_IGNORE", "ClassMap",
-    "block_buffer_mask", "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "format_report", "metrics",
+    "block_buffer_mask", "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "file_buffer_mask",
+    "format_report", "metrics",
     "plot_confusion", "random_folds", "write_report",
     "backward_elimination", "impurity_importance", "permutation_importance",
     "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",

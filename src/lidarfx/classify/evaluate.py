@@ -43,7 +43,7 @@ from .fastpredict import predict as fast_predict
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask",
-           "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
+           "file_buffer_mask", "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
 
 LAYOUT = "rows = reference, columns = predicted"
 
@@ -177,7 +177,7 @@ def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buff
     if not (buffer > 0) or not len(xy):
         return near
     if not math.isfinite(buffer):
-        raise LidarfxError(f"block buffer must be a finite number of metres, got {buffer!r}")
+        raise LidarfxError(f"buffer must be a finite number of metres, got {buffer!r}")
     s = float(block_size)
     bx = np.floor(xy[:, 0] / s).astype(np.int64)
     by = np.floor(xy[:, 1] / s).astype(np.int64)
@@ -207,9 +207,35 @@ def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buff
     return near
 
 
-def default_block_buffer(config: TrainConfig) -> float:
-    """The default buffer of the spatial-block CV: twice the largest radius (no training
-    point's neighbourhood then holds a point of a held-out point's), 0 for k-NN."""
+def file_buffer_mask(xy: np.ndarray, files: np.ndarray, buffer: float) -> np.ndarray:
+    """Points near another file: ``near[f, i]`` is True when point ``i`` of another file lies
+    within ``buffer`` m (plan distance) of a point of file ``f``.  Leave-one-file-out leaves
+    them out of the training when file ``f`` is held out: tiles of one survey are usually
+    contiguous, and the points along a shared edge are neighbours."""
+    from scipy.spatial import cKDTree
+
+    xy = np.asarray(xy, dtype=np.float64)
+    files = np.asarray(files, dtype=np.int64)
+    n_files = int(files.max()) + 1 if len(files) else 0
+    near = np.zeros((n_files, len(xy)), dtype=bool)
+    if not (buffer > 0) or n_files < 2:
+        return near
+    if not math.isfinite(buffer):
+        raise LidarfxError(f"buffer must be a finite number of metres, got {buffer!r}")
+    for f in range(n_files):
+        mine = files == f
+        if not mine.any():
+            continue
+        others = np.flatnonzero(~mine)
+        d, _ = cKDTree(xy[mine]).query(xy[others], distance_upper_bound=buffer)
+        near[f, others[d < buffer]] = True
+    return near
+
+
+def default_buffer(config: TrainConfig) -> float:
+    """The default buffer of the spatial-block CV and leave-one-file-out: twice the largest
+    radius (no training point's neighbourhood then holds a point of a held-out point's),
+    0 for k-NN."""
     if config.neighbourhood == "knn" or not config.radii:
         return 0.0
     return 2.0 * max(config.radii)
@@ -218,7 +244,8 @@ def default_block_buffer(config: TrainConfig) -> float:
 def fold_parts(folds: np.ndarray, y: np.ndarray, f: int, exclude: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
     """Training and held-out indices of fold ``f`` (labelled points only); ``exclude``
-    (:func:`block_buffer_mask`) removes the points near the held-out blocks from the training part."""
+    (:func:`block_buffer_mask`, :func:`file_buffer_mask`) removes the points near the held-out
+    part from the training part."""
     train = (folds != f) & (y >= 0)
     if exclude is not None:
         train &= ~exclude[f]
@@ -235,7 +262,8 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
     the points (thinned copies: row ``j`` of ``Xa`` is point ``rows[j]``); the
     training part of each fold adds a balanced sample of them like :func:`train`.
     ``exclude``: ``(n_folds, n)`` bool, points left out of fold ``f``'s training part
-    (:func:`block_buffer_mask`).  Returns the summed confusion matrix, per-fold results and
+    (:func:`block_buffer_mask`, :func:`file_buffer_mask`).  Returns the summed confusion matrix,
+    per-fold results and
     the fitted estimators with their held-out indices."""
     from .model import _aug_cap
 
@@ -390,7 +418,7 @@ def evaluate(
     test: Any = None,
     cv: int | None = 3,
     block_size: float | None = 20.0,
-    block_buffer: float | None = None,
+    buffer: float | None = None,
     random_cv: bool = True,
     leave_one_out: bool = False,
     classes: Any = None,
@@ -412,13 +440,15 @@ def evaluate(
       (when ``random_cv``); neighbouring points fall into different folds, so it
       is optimistic.
     * ``cv_blocks`` — ``cv``-fold cross-validation with spatial blocks of
-      ``block_size`` m (when ``block_size``), buffered: training points within
-      ``block_buffer`` m of a held-out block are left out of that fold's training
-      (default ``None``: twice the largest radius, so that no training point's
-      neighbourhood shares a point with a held-out point's; 0 for k-NN
-      neighbourhoods, which have no fixed size; ``0`` = no buffer).
+      ``block_size`` m (when ``block_size``).
     * ``leave_one_file_out`` — train on all files but one, test on it (when
       ``leave_one_out`` and ≥ 2 files).
+
+    Both are buffered: training points within ``buffer`` m of the held-out blocks
+    (of the held-out file's points) are left out of that fold's training (default
+    ``None``: twice the largest radius, so that no training point's neighbourhood
+    shares a point with a held-out point's; 0 for k-NN neighbourhoods, which have
+    no fixed size; ``0`` = no buffer).
     * ``test`` — train on all ``sources``, test on the ``test`` files (per file
       and pooled; with ``maps_dir`` an error map per test file, see
       :func:`evaluate_model`).
@@ -436,9 +466,9 @@ def evaluate(
     cfg = config or TrainConfig(**params)
     if config is not None and params:
         raise LidarfxError("give either config= or keyword parameters, not both")
-    buf = default_block_buffer(cfg) if block_buffer is None else float(block_buffer)
+    buf = default_buffer(cfg) if buffer is None else float(buffer)
     if not (buf >= 0 and math.isfinite(buf)):
-        raise LidarfxError(f"block buffer must be a number of metres >= 0, got {block_buffer!r}")
+        raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")
     t_all = time.perf_counter()
     srcs = read_sources(sources, progress=progress)
     cmap = resolve_classes(srcs, classes, ignore)
@@ -464,16 +494,26 @@ def evaluate(
         if cv and random_cv:
             runs.append(("cv_random", f"{cv}-fold CV, random folds (stratified by class)",
                          random_folds(len(y), int(cv), cv_seed, y), {}))
-        near = None
+        near: dict[str, np.ndarray] = {}  # per section: points left out of each fold's training
+        tail = f", buffer {buf:g} m" if buf > 0 else ""
         if cv and block_size:
             fb, blocks = block_folds(xy, int(cv), float(block_size), cv_seed, g)
-            near = block_buffer_mask(xy, fb, float(block_size), buf, g) if buf > 0 else None
-            title = f"{cv}-fold CV, spatial blocks of {float(block_size):g} m"
-            runs.append(("cv_blocks", title + (f", buffer {buf:g} m" if buf > 0 else ""),
+            if buf > 0:
+                near["cv_blocks"] = block_buffer_mask(xy, fb, float(block_size), buf, g)
+            runs.append(("cv_blocks", f"{cv}-fold CV, spatial blocks of {float(block_size):g} m" + tail,
                          fb, {"block_size": float(block_size), "blocks": int(blocks.max() + 1), "buffer": buf}))
         if leave_one_out and len(srcs) > 1:
-            runs.append(("leave_one_file_out", "leave one file out (train on the others)", g,
-                         {"files": [s.name for s in srcs]}))
+            if buf > 0:
+                near["leave_one_file_out"] = nf = file_buffer_mask(xy, g, buf)
+                for f, src in enumerate(srcs):
+                    left = np.unique(y[(g != f) & ~nf[f]])
+                    if len(left) < min(2, len(np.unique(y[g != f]))):
+                        raise LidarfxError(
+                            f"leave one file out: a buffer of {buf:g} m around {src.name} leaves "
+                            f"{'no training point' if not len(left) else 'only one class'} in the other files "
+                            "(the files overlap); give --buffer 0 to test on overlapping scans")
+            runs.append(("leave_one_file_out", "leave one file out (train on the others)" + tail, g,
+                         {"files": [s.name for s in srcs], "buffer": buf}))
         t0 = time.perf_counter()
         X = _file_features(srcs, cmap, cfg, progress)[0]
         X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
@@ -485,7 +525,7 @@ def evaluate(
             t0 = time.perf_counter()
             say(f"{title}:")
             cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug,
-                                                  exclude=near if key == "cv_blocks" else None)
+                                                  exclude=near.get(key))
             if key == "leave_one_file_out":
                 for pf in per_fold:
                     pf["file"] = srcs[pf["fold"]].name
@@ -519,7 +559,7 @@ def evaluate(
             say("backward elimination (random forest, 50 trees):")
             report["backward_elimination"] = backward_elimination(
                 X, y, cfg.feature_names(), folds, max_per_class=cfg.max_per_class, seed=cfg.seed, log=say,
-                exclude=near if blocks_run else None)
+                exclude=near.get("cv_blocks") if blocks_run else None)
             report["seconds"]["backward_elimination"] = round(time.perf_counter() - t0, 3)
     if test is not None:
         t0 = time.perf_counter()
@@ -571,11 +611,10 @@ def format_report(report: dict[str, Any]) -> str:
     for key, sec in report["sections"].items():
         out.append(f"== {sec['title']} [{key}] ==")
         if "block_size" in sec:
-            line = f"{sec['blocks']} blocks of {sec['block_size']:g} m"
-            if sec.get("buffer"):
-                line += (f"; training points within {sec['buffer']:g} m of a held-out block are left out of "
-                         "that fold's training")
-            out.append(line)
+            out.append(f"{sec['blocks']} blocks of {sec['block_size']:g} m")
+        if sec.get("buffer"):
+            out.append(f"training points within {sec['buffer']:g} m of the held-out "
+                       f"{'blocks' if 'block_size' in sec else 'file'} are left out of that fold's training")
         for pf in sec.get("folds", []):
             label = Path(pf["file"]).name if "file" in pf else f"fold {pf['fold']}"
             left = f", {pf['buffer_excluded']:,} training points in the buffer" if pf.get("buffer_excluded") else ""

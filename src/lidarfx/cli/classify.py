@@ -175,9 +175,9 @@ def register(sub) -> None:
                    help="M-fold cross-validation on FILES (default 3 unless --test/--leave-one-out/--model)")
     e.add_argument("--spatial-blocks", type=float, default=20.0, metavar="SIZE",
                    help="block size (m) of the spatial-block folds, default %(default)s; 0 = no block folds")
-    e.add_argument("--block-buffer", type=float, default=None, metavar="M",
-                   help="leave training points within M metres of a held-out block out of that fold's training "
-                        "(default: twice the largest radius; 0 = no buffer)")
+    e.add_argument("--buffer", type=float, default=None, metavar="M",
+                   help="spatial blocks and leave-one-out: leave training points within M metres of the held-out "
+                        "blocks / file out of that fold's training (default: twice the largest radius; 0 = none)")
     e.add_argument("--no-random-folds", action="store_true", help="skip the random-fold CV")
     e.add_argument("--leave-one-out", action="store_true", help="leave one file out (train on the others)")
     e.add_argument("--test", nargs="+", default=None, metavar="FILE",
@@ -385,7 +385,7 @@ def run_evaluate(args) -> int:
             raise LidarfxError("--spatial-blocks must be >= 0 (0 = no block folds)")
         report = evaluate(
             args.files, test=args.test, cv=cv, block_size=args.spatial_blocks or None,
-            block_buffer=args.block_buffer,
+            buffer=args.buffer,
             random_cv=not args.no_random_folds, leave_one_out=args.leave_one_out, classes=args.classes,
             ignore=_ignore(args), config=_config(args), importance=args.importance,
             eliminate=args.backward_elimination, log=say, maps_dir=args.out if args.test else None,
