@@ -14,7 +14,8 @@ EPILOG = """examples:
   lidarfx classify train tile1.laz tile2.laz tile3.laz --model als.skops --classes 2,3+4+5,6
   # classify a new cloud (writes the LAS classification field; --confidence adds a float32 attribute)
   lidarfx classify predict new.laz new_classified.laz --model als.skops --confidence
-  # honest evaluation: 3-fold CV with random AND spatial-block folds (20 m), report in ./eval
+  # honest evaluation: 3-fold CV with random AND spatial-block folds (20 m blocks; training points within
+  # twice the largest radius of a held-out block left out, --buffer), report in ./eval
   lidarfx classify evaluate tile*.laz --classes 2,3+4+5,6 --cv 3 --spatial-blocks 20 --out eval
   # leave one tile out, and train on the tiles / test on other files
   lidarfx classify evaluate tile*.laz --classes 2,3+4+5,6 --leave-one-out --test other1.laz other2.laz
