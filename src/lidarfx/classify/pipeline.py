@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
+import numba as nb
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
@@ -351,8 +352,15 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     " --features ... (or predict without --precomputed)"
                 )
 
+    def _hag(self, cloud: PointCloud, unit: float, cache: dict) -> np.ndarray:
+        """The height above ground of every point of ``cloud`` in metres, computed once per cloud."""
+        key = id(cloud)
+        if key not in cache:
+            cache[key] = hag(cloud, self.ground) * np.float32(unit)
+        return cache[key]
+
     def _matrix(self, sample: "CloudSample", names, slots, point, rs, cache) -> np.ndarray:
-        from ..features.api import feature_arrays
+        from ..features.api import _new_index, feature_arrays
         from ..features.registry import Request
 
         cloud, idx = sample.cloud, sample.index
@@ -361,15 +369,17 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         # a model trained on metre data works on a US-feet cloud and vice versa
         unit = unit_to_metre(cloud)
         m = len(sample)
-        out = np.empty((m, len(names)), dtype=np.float32)
+        out = np.empty((len(names), m), dtype=np.float32)  # one row per feature: contiguous writes
         col = {n: i for i, n in enumerate(names)}
+        if "height_above_ground" in col and not (self.precomputed and "height_above_ground" in cloud):
+            self._hag(cloud, unit, cache)  # first: its triangulation is the peak, before the index exists
         if slots and m:
             if self.precomputed:
                 for n in names:
                     if n in EXTRA_INPUTS or n in _NEEDS:
                         continue
                     v = np.asarray(cloud[n], dtype=np.float32)
-                    out[:, col[n]] = v if idx is None else v[idx]
+                    out[col[n]] = v if idx is None else v[idx]
             else:
                 key = ("metres", id(cloud))
                 if key not in cache:  # once per cloud, not per chunk of queries
@@ -382,13 +392,20 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                         limit = float(self.max_disc_points) / (math.pi * rs[0] ** 2)
                     cache[key] = thinning_mask(xyz, limit)
                 keep = cache[key]
+                req = Request(tuple(slots), ())
+                key = ("index", id(cloud))
+                if key not in cache:  # the neighbour cloud and its index, shared by all chunks
+                    nb_xyz = xyz if keep is None else xyz[keep]
+                    cache[key] = (nb_xyz, _new_index(nb_xyz, self.neighbourhood, self.k, rs, req))
+                nb_xyz, index = cache[key]
                 if keep is None:
-                    nb_xyz, q_xyz = xyz, (None if idx is None else xyz[idx])
+                    q_xyz = None if idx is None else xyz[idx]
                 else:
-                    nb_xyz, q_xyz = xyz[keep], (xyz if idx is None else xyz[idx])
+                    q_xyz = xyz if idx is None else xyz[idx]
                 arrays = feature_arrays(
                     nb_xyz,
-                    Request(tuple(slots), ()),
+                    req,
+                    index=index,
                     radii=rs or None,
                     neighbourhood=self.neighbourhood,
                     k=self.k,
@@ -405,14 +422,19 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 for si, sfx in enumerate(sfx_of):
                     for s in slots:
                         key = S.NAMES[s] + ("" if single else sfx)
-                        out[:, col[S.NAMES[s] + sfx]] = arrays[key]
-        sel = (lambda a: a) if idx is None else (lambda a: a[idx])
+                        out[col[S.NAMES[s] + sfx]] = arrays[key]
+        def sel(a) -> np.ndarray:  # this chunk's rows as float32 (select first: a chunk, not the cloud)
+            return np.asarray(a if idx is None else np.asarray(a)[idx], dtype=np.float32)
+
+        def sel_f64(a) -> np.ndarray:
+            return np.asarray(a if idx is None else np.asarray(a)[idx], dtype=np.float64)
+
         for n in point:
             if n == "return_ratio":
-                rn = sel(np.asarray(cloud["return_number"], dtype=np.float32))
-                nr = sel(np.asarray(cloud["number_of_returns"], dtype=np.float32))
+                rn = sel(cloud["return_number"])
+                nr = sel(cloud["number_of_returns"])
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    out[:, col[n]] = np.where(nr > 0, rn / nr, np.nan)
+                    out[col[n]] = np.where(nr > 0, rn / nr, np.nan)
             else:  # pragma: no cover - the registry has no other per-point feature
                 raise LidarfxError(f"unknown per-point feature {n!r}")
         for n in names:
@@ -420,29 +442,48 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 continue
             if n == "height_above_ground":
                 if self.precomputed and "height_above_ground" in cloud:
-                    v = np.asarray(cloud["height_above_ground"], dtype=np.float32)
+                    v = sel(cloud["height_above_ground"])
                 else:
-                    key = id(cloud)
-                    if key not in cache:
-                        cache[key] = hag(cloud, self.ground) * np.float32(unit)
-                    v = cache[key]
+                    v = sel(self._hag(cloud, unit, cache))
                 if self.hag_cap is not None:
                     v = np.minimum(v, np.float32(self.hag_cap))
             elif n in ("number_of_returns", "return_number", "intensity"):
-                v = np.asarray(cloud[n], dtype=np.float32)
+                v = sel(cloud[n])
             elif n == "intensity_norm":
                 key = ("int", id(cloud))
                 if key not in cache:
                     it = np.asarray(cloud["intensity"], dtype=np.float32)
                     med = float(np.median(it[it > 0])) if np.any(it > 0) else 1.0
                     cache[key] = it / med
-                v = cache[key]
+                v = sel(cache[key])
             elif n == "z":
-                v = ((cloud.z - cloud.z.min()) * unit).astype(np.float32) if len(cloud) else np.zeros(0, np.float32)
+                key = ("zmin", id(cloud))
+                if key not in cache:
+                    cache[key] = cloud.z.min() if len(cloud) else 0.0
+                v = ((sel_f64(cloud.z) - cache[key]) * unit).astype(np.float32)
             else:  # pragma: no cover
                 raise LidarfxError(f"unknown input {n!r}")
-            out[:, col[n]] = sel(v)
-        return out
+            out[col[n]] = v
+        return _rows(out)
+
+
+@nb.njit(parallel=True, cache=True)
+def _transpose_blocks(cols: np.ndarray, out: np.ndarray) -> None:
+    k, m = cols.shape
+    for b in nb.prange((m + 1023) // 1024):  # 1024 rows at a time: the block stays in cache
+        for j in range(k):
+            for i in range(b * 1024, min(b * 1024 + 1024, m)):
+                out[i, j] = cols[j, i]
+
+
+def _rows(cols: np.ndarray) -> np.ndarray:
+    """The (m, k) C-order matrix of a (k, m) one: features are filled column by column, and
+    writing a column of a row-major matrix directly is a strided scatter (2 s per million rows of
+    81 columns here, against 0.1 s for contiguous rows and this blocked transpose)."""
+    out = np.empty((cols.shape[1], cols.shape[0]), dtype=cols.dtype)
+    if out.size:
+        _transpose_blocks(cols, out)
+    return out
 
 
 def point_density(xyz: np.ndarray, cell: float = 2.0) -> float:
