@@ -744,6 +744,16 @@ def test_prediction_in_chunks_equals_one_pass(facades, rf_model, monkeypatch):
     assert np.array_equal(codes, rf_model.predict(b))  # the no-confidence path gives the same classes
 
 
+def test_transform_of_several_clouds_equals_one_cloud_at_a_time(facades):
+    # the neighbour index is kept for the current cloud only: a list switches clouds and back
+    a, b = facades
+    tr = LidarFeatures(features="eigen,height_above_ground", radii=[0.3, 0.5]).fit()
+    ia, ib, ia2 = np.arange(0, 3000, 3), np.arange(5, 4000, 4), np.arange(7000, 9000, 2)
+    X = tr.transform([CloudSample(a, ia), CloudSample(b, ib), CloudSample(a, ia2)])
+    one = [tr.transform(CloudSample(c, i)) for c, i in ((a, ia), (b, ib), (a, ia2))]
+    assert X.flags["C_CONTIGUOUS"] and np.array_equal(X, np.vstack(one), equal_nan=True)
+
+
 def test_evaluate_model_without_model_classes(facades, rf_model):
     from lidarfx.classify import evaluate_model
     from lidarfx.errors import LidarfxWarning

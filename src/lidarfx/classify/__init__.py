@@ -19,10 +19,10 @@ from .classes import ASPRS_NAMES, DEFAULT_IGNORE, ClassMap
 from .evaluate import (
     block_buffer_mask,
     block_folds,
-    file_buffer_mask,
     confusion_matrix,
     evaluate,
     evaluate_model,
+    file_buffer_mask,
     format_report,
     metrics,
     plot_confusion,

@@ -393,11 +393,13 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     cache[key] = thinning_mask(xyz, limit)
                 keep = cache[key]
                 req = Request(tuple(slots), ())
-                key = ("index", id(cloud))
-                if key not in cache:  # the neighbour cloud and its index, shared by all chunks
+                held = cache.get("index")
+                if held is None or held[0] != id(cloud):  # the neighbour cloud and its index, shared by all
+                    # chunks of this cloud; only the current cloud's is kept (a list of clouds comes cloud by cloud)
+                    cache.pop("index", None)
                     nb_xyz = xyz if keep is None else xyz[keep]
-                    cache[key] = (nb_xyz, _new_index(nb_xyz, self.neighbourhood, self.k, rs, req))
-                nb_xyz, index = cache[key]
+                    cache["index"] = (id(cloud), nb_xyz, _new_index(nb_xyz, self.neighbourhood, self.k, rs, req))
+                _, nb_xyz, index = cache["index"]
                 if keep is None:
                     q_xyz = None if idx is None else xyz[idx]
                 else:
@@ -477,9 +479,9 @@ def _transpose_blocks(cols: np.ndarray, out: np.ndarray) -> None:
 
 
 def _rows(cols: np.ndarray) -> np.ndarray:
-    """The (m, k) C-order matrix of a (k, m) one: features are filled column by column, and
-    writing a column of a row-major matrix directly is a strided scatter (2 s per million rows of
-    81 columns here, against 0.1 s for contiguous rows and this blocked transpose)."""
+    """The (m, k) C-order matrix of a (k, m) one.  The features arrive one at a time, and writing
+    each into a column of a row-major matrix is a strided scatter (2 s per million rows of 81
+    columns here, against 0.1 s for contiguous rows plus this blocked transpose)."""
     out = np.empty((cols.shape[1], cols.shape[0]), dtype=cols.dtype)
     if out.size:
         _transpose_blocks(cols, out)
