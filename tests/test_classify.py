@@ -493,6 +493,8 @@ def test_evaluate_random_vs_blocks_and_report(tmp_path, facades):
 def test_evaluate_buffers_blocks_and_neighbouring_files(facades):
     from scipy.spatial import cKDTree
 
+    from lidarfx.classify import format_report
+
     a, _ = facades
     west, east = a.subset(a.x < 6.0), a.subset(a.x >= 6.0)  # two adjacent "tiles"
     rep = evaluate([west, east], cv=3, block_size=4.0, random_cv=False, leave_one_out=True, classes=FACADE6,
@@ -503,14 +505,10 @@ def test_evaluate_buffers_blocks_and_neighbouring_files(facades):
     assert all(pf["buffer_excluded"] > 0 for pf in bl["folds"])
     # leave one file out drops the other tile's strip within 1 m of the held-out tile
     cmap = ClassMap.parse(FACADE6)
-    usable = [np.flatnonzero(cmap.index_of(c["classification"]) >= 0) for c in (west, east)]
-    for pf, held, other in ((lo["folds"][0], west, east), (lo["folds"][1], east, west)):
-        i_h = usable[0] if held is west else usable[1]
-        i_o = usable[1] if held is west else usable[0]
-        d, _ = cKDTree(held.xyz[i_h, :2]).query(other.xyz[i_o, :2])
+    labelled = [np.flatnonzero(cmap.index_of(c["classification"]) >= 0) for c in (west, east)]
+    for pf, (i_h, i_o), (held, other) in zip(lo["folds"], ((0, 1), (1, 0)), ((west, east), (east, west))):
+        d, _ = cKDTree(held.xyz[labelled[i_h], :2]).query(other.xyz[labelled[i_o], :2])
         assert pf["buffer_excluded"] == int((d < 1.0).sum()) > 0
-    from lidarfx.classify import format_report
-
     txt = format_report(rep)
     assert "training points within 1 m of the held-out file are left out" in txt
 
