@@ -320,11 +320,12 @@ def _labelled(sources: list[Source], cmap: ClassMap
     return idxs, np.concatenate(ys).astype(np.int64), np.vstack(xys), np.concatenate(gs)
 
 
-def _file_features(sources: list[Source], cmap: ClassMap, config: TrainConfig, progress: bool | None
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Features, labels, xy and file id of every labelled point of every source."""
+def _file_features(sources: list[Source], cmap: ClassMap, config: TrainConfig, progress: bool | None,
+                   labelled: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Features, labels, xy and file id of every labelled point of every source
+    (``labelled``: :func:`_labelled` of ``sources``, when already known)."""
     tr = config.transformer(progress=progress)
-    idxs, y, xy, g = _labelled(sources, cmap)
+    idxs, y, xy, g = labelled or _labelled(sources, cmap)
     X = np.vstack([tr.transform(CloudSample(s.cloud, idx)) for s, idx in zip(sources, idxs)])
     return X, y, xy, g
 
@@ -489,7 +490,8 @@ def evaluate(
     if (importance or eliminate) and not need_cv:
         raise LidarfxError("feature importance and backward elimination need cross-validation (cv >= 2)")
     if need_cv:
-        _, y, xy, g = _labelled(srcs, cmap)  # the folds first: a bad fold setting fails before the features
+        labelled = _labelled(srcs, cmap)  # the folds first: a bad fold setting fails before the features
+        _, y, xy, g = labelled
         runs = []
         if cv and random_cv:
             runs.append(("cv_random", f"{cv}-fold CV, random folds (stratified by class)",
@@ -515,7 +517,7 @@ def evaluate(
             runs.append(("leave_one_file_out", "leave one file out (train on the others)" + tail, g,
                          {"files": [s.name for s in srcs], "buffer": buf}))
         t0 = time.perf_counter()
-        X = _file_features(srcs, cmap, cfg, progress)[0]
+        X = _file_features(srcs, cmap, cfg, progress, labelled)[0]
         X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
         X_aug += [_thinned_features(srcs, copies, cmap, cfg, progress) for copies in thinned_sources(srcs, cfg)]
         report["seconds"]["cv_features"] = round(time.perf_counter() - t0, 3)

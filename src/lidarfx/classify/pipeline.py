@@ -425,11 +425,8 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     for s in slots:
                         key = S.NAMES[s] + ("" if single else sfx)
                         out[col[S.NAMES[s] + sfx]] = arrays[key]
-        def sel(a) -> np.ndarray:  # this chunk's rows as float32 (select first: a chunk, not the cloud)
-            return np.asarray(a if idx is None else np.asarray(a)[idx], dtype=np.float32)
-
-        def sel_f64(a) -> np.ndarray:
-            return np.asarray(a if idx is None else np.asarray(a)[idx], dtype=np.float64)
+        def sel(a, dtype=np.float32) -> np.ndarray:  # this chunk's rows (select first: a chunk, not the cloud)
+            return np.asarray(a if idx is None else np.asarray(a)[idx], dtype=dtype)
 
         for n in point:
             if n == "return_ratio":
@@ -462,7 +459,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 key = ("zmin", id(cloud))
                 if key not in cache:
                     cache[key] = cloud.z.min() if len(cloud) else 0.0
-                v = ((sel_f64(cloud.z) - cache[key]) * unit).astype(np.float32)
+                v = ((sel(cloud.z, np.float64) - cache[key]) * unit).astype(np.float32)
             else:  # pragma: no cover
                 raise LidarfxError(f"unknown input {n!r}")
             out[col[n]] = v
