@@ -351,8 +351,9 @@ def test_tin_tiled_equals_one_piece(max_points, monkeypatch):
     real = tin_module._tin_one
     monkeypatch.setattr(tin_module, "_tin_one",
                         lambda *a: widths.append(a[5][2] - a[5][0] if len(a) > 5 else np.inf) or real(*a))
-    tiled = tin_interpolate(xy, z, q, max_points=max_points)
+    tiled = tin_interpolate(xy, z, q, max_points=max_points, workers=1)
     assert np.array_equal(one, tiled)
+    assert np.array_equal(tiled, tin_interpolate(xy, z, q, max_points=max_points, workers=3))  # tiles in threads
     # tiles were used, and the queries in the holes needed larger areas than their tile's
     assert len(widths) > 4 and max(w for w in widths if np.isfinite(w)) > 1.5 * min(widths)
     assert np.array_equal(tin_interpolate(xy, z, q, nearest_outside=False),

@@ -7,15 +7,23 @@ query), so it is a few steps long.
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numba as nb
 import numpy as np
 from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
-__all__ = ["tin_interpolate", "TIN_TILE_POINTS"]
+__all__ = ["tin_interpolate", "TIN_TILE_POINTS", "TIN_TILE_WORKERS"]
 
 TIN_TILE_POINTS = 4_000_000
 """With ``max_points``, more known points than this are triangulated tile by tile (bounded memory:
 Qhull needs about 0.6 kB per point)."""
+
+TIN_TILE_WORKERS = max(1, min(2, int(nb.config.NUMBA_NUM_THREADS)))
+"""Tiles triangulated at the same time (threads: Qhull and the walk release the GIL): 2, or 1 when
+numba may use one thread only (one core, or ``NUMBA_NUM_THREADS=1``).  The tiles hold about
+``max_points / 4`` points each, so two at a time hold what one tile of ``max_points / 2`` would; the
+results do not depend on the number of threads."""
 
 
 @nb.njit(cache=True, inline="always")
@@ -35,7 +43,7 @@ def _bary(px, py, a, b, c, x, y):
     return l0, l1, det
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out, found):
     n = qx.shape[0]
     for k in range(n):
@@ -85,7 +93,7 @@ def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out, found):
 
 
 def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, nearest_outside: bool = True,
-                    joggle: bool = False, max_points: int | None = None) -> np.ndarray:
+                    joggle: bool = False, max_points: int | None = None, workers: int | None = None) -> np.ndarray:
     """Linear (TIN) interpolation of ``values`` known at ``xy`` (n×2) at ``query`` (m×2).
 
     Queries outside the convex hull get the value of the nearest known point
@@ -106,12 +114,15 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     they need; the last resort is all points.  The result
     equals the one-piece interpolation, except where four or more known points lie
     on one circle: there both triangulations are valid and may split differently.
+    ``workers`` tiles (each 1 / ``workers`` of the size) are triangulated at the
+    same time (default :data:`TIN_TILE_WORKERS`); the result does not depend on it.
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     values = np.ascontiguousarray(values, dtype=np.float64)
     query = np.ascontiguousarray(query, dtype=np.float64)
     if max_points is not None and len(xy) > max(int(max_points), 3) and len(query):
-        return _tin_tiled(xy, values, query, nearest_outside, joggle, int(max_points))
+        return _tin_tiled(xy, values, query, nearest_outside, joggle, int(max_points),
+                          TIN_TILE_WORKERS if workers is None else max(int(workers), 1))
     return _tin_one(xy, values, query, nearest_outside, joggle)[0]
 
 
@@ -219,20 +230,29 @@ def _outside_hull(hull: tuple | None, query: np.ndarray) -> np.ndarray:
     return out
 
 
+_FEW = 64  # at most this many queries left after a tile's triangulation are answered one at a time
+
+
 def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
-               max_points: int) -> np.ndarray:
+               max_points: int, workers: int = 1) -> np.ndarray:
     out = np.full(len(query), np.nan)
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     area = max(float(np.prod(np.maximum(hi - lo, 1e-9))), 1e-12)
-    side = max(float(np.sqrt(area * max_points / (2.0 * len(xy)))), 1e-6)  # ~ max_points/2 known points per tile
+    # ~ max_points / 4 known points per tile: two tiles at a time (TIN_TILE_WORKERS) hold about as many
+    # points as one tile of max_points / 2 would.  The tiling does not depend on ``workers``, so neither
+    # does the result (ties between cocircular points are split by the tile's triangulation)
+    side = max(float(np.sqrt(area * max_points / (4.0 * len(xy)))), 1e-6)
     hull = _hull_of(xy)
     qlo = query.min(axis=0)
     tij = np.floor((query - qlo) / side).astype(np.int64)
     key = tij[:, 0] * (int(tij[:, 1].max()) + 1) + tij[:, 1]
     order = np.argsort(key, kind="stable")
-    for todo in np.split(order, np.flatnonzero(np.diff(key[order])) + 1):
-        x0, y0 = qlo + tij[todo[0]] * side
-        box = (x0 - side / 8, y0 - side / 8, x0 + 1.125 * side, y0 + 1.125 * side)  # a margin of side / 8
+
+    def tile(todo: np.ndarray, box: tuple | None = None) -> None:  # writes only out[todo]: tiles may run at once
+        whole_tile = box is None
+        if whole_tile:
+            x0, y0 = qlo + tij[todo[0]] * side
+            box = (x0 - side / 8, y0 - side / 8, x0 + 1.125 * side, y0 + 1.125 * side)  # a margin of side / 8
         while len(todo):
             if box[0] <= lo[0] and box[1] <= lo[1] and box[2] >= hi[0] and box[3] >= hi[1]:
                 out[todo] = _tin_one(xy, values, query[todo], nearest_outside, joggle)[0]  # all points
@@ -242,10 +262,26 @@ def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_ou
             v, ok, need = _tin_one(xy[sel], values[sel], query[todo], nearest_outside, joggle, box, hull, (lo, hi))
             out[todo[ok]] = v[ok]
             todo, need = todo[~ok], need[~ok]
+            if whole_tile and 0 < len(todo) <= _FEW:  # a few left (circles reaching beyond the tile): next
+                # the area their circles need (and a margin), not the whole tile again; from there on it grows
+                b = (need[:, 0].min(), need[:, 1].min(), need[:, 2].max(), need[:, 3].max())
+                r = max(b[2] - b[0], b[3] - b[1], side) / 8
+                box = (b[0] - r, b[1] - r, b[2] + r, b[3] + r)
+                whole_tile = False
+                continue
+            whole_tile = False
             if len(todo):  # the next area: every circle still needed, and more than this one
                 w = max(box[2] - box[0], box[3] - box[1]) / 2
                 grow = np.array([need[:, 0].min() - w / 4, need[:, 1].min() - w / 4,
                                  need[:, 2].max() + w / 4, need[:, 3].max() + w / 4])
                 box = (min(grow[0], box[0] - w / 4), min(grow[1], box[1] - w / 4),
                        max(grow[2], box[2] + w / 4), max(grow[3], box[3] + w / 4))
+
+    tiles = np.split(order, np.flatnonzero(np.diff(key[order])) + 1)
+    if workers > 1 and len(tiles) > 1:
+        with ThreadPoolExecutor(max_workers=min(workers, len(tiles))) as pool:
+            list(pool.map(tile, tiles))  # list(): re-raises a tile's exception here
+    else:
+        for todo in tiles:
+            tile(todo)
     return out
