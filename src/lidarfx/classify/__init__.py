@@ -41,6 +41,8 @@ from .pipeline import (
     balanced_sample,
     make_classifier,
     make_pipeline,
+    pulse_heights,
+    pulse_ids,
     usable_mask,
 )
 
@@ -52,5 +54,5 @@ __all__ = [
     "backward_elimination", "impurity_importance", "permutation_importance",
     "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",
     "CLASSIFIERS", "DEFAULT_FEATURES", "DEFAULT_RADII", "EXTRA_INPUTS", "CloudSample", "LidarFeatures",
-    "balanced_sample", "make_classifier", "make_pipeline", "usable_mask",
+    "balanced_sample", "make_classifier", "make_pipeline", "pulse_heights", "pulse_ids", "usable_mask",
 ]

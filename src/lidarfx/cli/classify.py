@@ -68,7 +68,8 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("model")
     g.add_argument("-f", "--features", default=None,
                    help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
-                        "return_number, intensity, intensity_norm, z (default: the ALS list, see --help epilog)")
+                        "return_number, intensity, intensity_norm, z, pulse_above, pulse_below "
+                        "(default: the ALS list, see --help epilog)")
     g.add_argument("-r", "--radius", type=float, action="append", default=None,
                    help="neighbourhood radius in m (repeat for multi-scale; default 1, 2, 3)")
     g.add_argument("--classes", default=None,
