@@ -300,7 +300,8 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
             per_fold[-1]["buffer_excluded"] = int((exclude[f] & (folds != f) & (y >= 0)).sum())
         fitted.append((est, te))
         if log:
-            log(f"  fold {int(f)}: train {len(s):,} / test {len(te):,} points, OA {m['oa']:.4f}, "
+            copies = f" ({len(s):,} + {len(yf) - len(s):,} from augmented copies)" if len(yf) > len(s) else ""
+            log(f"  fold {int(f)}: train {len(yf):,}{copies} / test {len(te):,} points, OA {m['oa']:.4f}, "
                 f"mean F1 {m['mean_f1']:.4f}")
     return cm, per_fold, fitted
 
