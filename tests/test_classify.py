@@ -677,6 +677,15 @@ def test_pulse_thinning_keeps_whole_pulses():
     assert pulse_thinning_mask(bare, 0.5, seed=0).mean() == pytest.approx(0.5, abs=0.02)
     zero = lidarfx.PointCloud(c.xyz, {"gps_time": np.zeros(len(c))})  # times that are not pulse stamps
     assert pulse_thinning_mask(zero, 0.5, seed=0).mean() == pytest.approx(0.5, abs=0.02)
+    # pulses that share a (truncated) GPS time are still thinned one by one (pulse_ids: file order)
+    rn = np.concatenate([np.arange(1, k + 1) for k in returns])
+    shared = lidarfx.PointCloud(c.xyz, {"gps_time": np.repeat(np.arange(n_pulses) // 2 * 1e-5 + 1e5, returns),
+                                        "return_number": rn.astype(np.uint8),
+                                        "number_of_returns": np.repeat(returns, returns).astype(np.uint8)})
+    m = pulse_thinning_mask(shared, 0.5, seed=2)
+    kept = np.bincount(np.repeat(np.arange(n_pulses), returns), weights=m) / returns
+    assert set(np.unique(kept)) == {0.0, 1.0}
+    assert (kept[0::2] != kept[1::2]).mean() == pytest.approx(0.5, abs=0.03)  # time-sharing pairs split
 
 
 def _pulse_cloud(t, rn, nr, z):

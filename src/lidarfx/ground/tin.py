@@ -114,8 +114,8 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     they need; the last resort is all points.  The result
     equals the one-piece interpolation, except where four or more known points lie
     on one circle: there both triangulations are valid and may split differently.
-    ``workers`` tiles (each 1 / ``workers`` of the size) are triangulated at the
-    same time (default :data:`TIN_TILE_WORKERS`); the result does not depend on it.
+    ``workers`` tiles are triangulated at the same time in threads (default
+    :data:`TIN_TILE_WORKERS`); the tiling, and so the result, does not depend on it.
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     values = np.ascontiguousarray(values, dtype=np.float64)
@@ -230,7 +230,7 @@ def _outside_hull(hull: tuple | None, query: np.ndarray) -> np.ndarray:
     return out
 
 
-_FEW = 64  # at most this many queries left after a tile's triangulation are answered one at a time
+_FEW = 64  # when at most this many queries of a tile are left, they are retried on the area they need
 
 
 def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
@@ -248,11 +248,10 @@ def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_ou
     key = tij[:, 0] * (int(tij[:, 1].max()) + 1) + tij[:, 1]
     order = np.argsort(key, kind="stable")
 
-    def tile(todo: np.ndarray, box: tuple | None = None) -> None:  # writes only out[todo]: tiles may run at once
-        whole_tile = box is None
-        if whole_tile:
-            x0, y0 = qlo + tij[todo[0]] * side
-            box = (x0 - side / 8, y0 - side / 8, x0 + 1.125 * side, y0 + 1.125 * side)  # a margin of side / 8
+    def tile(todo: np.ndarray) -> None:  # writes only out[todo]: tiles may run at the same time
+        x0, y0 = qlo + tij[todo[0]] * side
+        box = (x0 - side / 8, y0 - side / 8, x0 + 1.125 * side, y0 + 1.125 * side)  # a margin of side / 8
+        whole_tile = True
         while len(todo):
             if box[0] <= lo[0] and box[1] <= lo[1] and box[2] >= hi[0] and box[3] >= hi[1]:
                 out[todo] = _tin_one(xy, values, query[todo], nearest_outside, joggle)[0]  # all points
