@@ -520,7 +520,13 @@ def point_density(xyz: np.ndarray, cell: float = 2.0) -> float:
         return 0.0
     ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
     key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    return float(len(xyz)) / (len(np.unique(key)) * cell * cell)
+    top = int(key.max()) + 1
+    # occupied cells: a count per cell when the grid is not much larger than the cloud (no sort)
+    if top <= 4 * len(key) + 1_000_000:
+        occupied = np.count_nonzero(np.bincount(key, minlength=top))
+    else:
+        occupied = len(np.unique(key))
+    return float(len(xyz)) / (occupied * cell * cell)
 
 
 def unit_to_metre(cloud: PointCloud) -> float:
