@@ -738,7 +738,7 @@ def test_pulse_ids_on_the_ign_tile_with_truncated_gps_times():
 
     path = IGN_TRAIN[0]
     if not path.exists():
-        pytest.skip(f"{path} not present")
+        pytest.skip(f"IGN training tile not found (shared real-data folder): {path}")
     c = lidarfx.read(path)
     pid = pulse_ids(c)
     nr = np.asarray(c["number_of_returns"])

@@ -19,6 +19,7 @@ What ``transform`` accepts (``X``):
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
@@ -27,7 +28,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from ..cloud import PointCloud
-from ..errors import LidarfxError
+from ..errors import LidarfxError, LidarfxWarning
 from ..features.api import check_options, radii_list, scale_suffix
 
 __all__ = [
@@ -467,19 +468,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 key = ("pulse", id(cloud))
                 if key not in cache:
                     pid = pulse_ids(cloud)
-                    if pid is not None:
-                        nr = np.asarray(cloud["number_of_returns"])
-                        multi = nr > 1
-                        whole = np.bincount(pid)[pid] == nr  # the pulse has all its returns
-                        if multi.sum() >= 100 and whole[multi].mean() < 0.8:
-                            import warnings
-
-                            from ..errors import LidarfxWarning
-
-                            warnings.warn(
-                                f"{sample.name}: only {whole[multi].mean():.0%} of the multi-return points form "
-                                "complete pulses (returns not in acquisition order, e.g. a spatially sorted "
-                                "file?); pulse_above / pulse_below are unreliable", LidarfxWarning, stacklevel=4)
+                    _warn_broken_pulses(cloud, pid, sample.name)
                     cache[key] = pulse_heights(cloud, pid)
                 v = sel(cache[key][0 if n == "pulse_above" else 1]) * np.float32(unit)
                 lim = np.float32(self.hag_cap if self.hag_cap is not None else np.inf)
@@ -571,13 +560,28 @@ def pulse_ids(cloud: PointCloud) -> np.ndarray | None:
     run = np.cumsum(new) - 1
     run_complete = np.bincount(run)[run] == nr
     order = np.lexsort((nr, t))
+    ts, ns = t[order], nr[order]
     key_new = np.ones(len(t), dtype=bool)
-    key_new[1:] = (t[order][1:] != t[order][:-1]) | (nr[order][1:] != nr[order][:-1])
+    key_new[1:] = (ts[1:] != ts[:-1]) | (ns[1:] != ns[:-1])
     group = np.empty(len(t), dtype=np.int64)
     group[order] = np.cumsum(key_new) - 1
     group_complete = np.bincount(group)[group] == nr
     use_group = ~run_complete & group_complete
     return np.where(use_group, group + int(run[-1]) + 1, run)
+
+
+def _warn_broken_pulses(cloud: PointCloud, pid: np.ndarray | None, name: str) -> None:
+    """Warn when fewer than 80 % of the multi-return points lie in complete pulses (file not in
+    acquisition order, e.g. spatially sorted): the pulse inputs would be wrong without a word."""
+    if pid is None:
+        return
+    nr = np.asarray(cloud["number_of_returns"])
+    multi = nr > 1
+    whole = np.bincount(pid)[pid] == nr  # the pulse has all its returns
+    if multi.sum() >= 100 and whole[multi].mean() < 0.8:
+        warnings.warn(f"{name}: only {whole[multi].mean():.0%} of the multi-return points form complete pulses "
+                      "(returns not in acquisition order, e.g. a spatially sorted file?); pulse_above / "
+                      "pulse_below are unreliable", LidarfxWarning, stacklevel=5)
 
 
 def pulse_heights(cloud: PointCloud, pid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
