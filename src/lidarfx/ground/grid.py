@@ -71,28 +71,67 @@ def min_surface(i: np.ndarray, j: np.ndarray, z: np.ndarray, spec: GridSpec) -> 
     return _min_kernel(i, j, np.ascontiguousarray(z, dtype=np.float64), spec.ny, spec.nx)
 
 
-def inpaint(grid: np.ndarray, spec: GridSpec, xy: np.ndarray | None = None) -> np.ndarray:
+INPAINT_JITTER = 1e-3
+"""Known cell centres are moved by up to ± half this many cells (a fixed pseudo-random offset
+per cell) before they are triangulated, so that the Delaunay triangulation is unique."""
+
+
+def _cell_jitter(i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A fixed pseudo-random offset in [−½, ½)² per cell (row ``i``, column ``j``).
+
+    It depends on the cell alone (a splitmix64 hash of its row and column), not on
+    which other cells are triangulated with it.
+    """
+    with np.errstate(over="ignore"):
+        h = (i.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) ^ (j.astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F))
+        h ^= h >> np.uint64(31)
+        h *= np.uint64(0xBF58476D1CE4E5B9)
+        h ^= h >> np.uint64(29)
+        a = (h >> np.uint64(11)).astype(np.float64) / 2.0**53
+        h *= np.uint64(0x94D049BB133111EB)
+        h ^= h >> np.uint64(32)
+        b = (h >> np.uint64(11)).astype(np.float64) / 2.0**53
+    return a - 0.5, b - 0.5
+
+
+def inpaint(grid: np.ndarray, spec: GridSpec, *, all_known: bool = False) -> np.ndarray:
     """Fill the NaN cells of ``grid`` by linear (TIN) interpolation of the known cells.
 
-    The known values sit at ``xy`` (local coordinates, one row per known cell in
-    row-major order of ``np.isfinite(grid)``) or, by default, at the cell
-    centres.  Cells outside the convex hull of the known cells take the value
-    of the nearest known cell.  Known cells keep their values.
+    The known values sit at the cell centres, each moved by at most
+    :data:`INPAINT_JITTER` / 2 cells (:func:`_cell_jitter`): a regular grid has
+    cocircular points everywhere, and its Delaunay triangulation would otherwise
+    split them arbitrarily.  Cells outside the convex hull of the known cells take
+    the value of the nearest known cell.  Known cells keep their values.
+
+    Only the *border* cells are triangulated: known cells with an empty cell
+    among their 8 neighbours or on the edge of the grid.  The answer is the same
+    as from all known cells (``all_known=True``, for tests).  Proof: let a known
+    cell v have 8 known neighbours and let an empty cell e lie in a Delaunay
+    triangle with corner v.  e is at least 2 cells from v, so the triangle's
+    circumcircle, which passes through v and holds e, has a radius R ≥ 1 cell.
+    A neighbour at distance 1 in the direction within 45° of the circle's centre
+    (angle θ) lies inside it, since 1 < 2R·cos θ — the triangle is not Delaunay.
+    So the triangles that cover empty cells have border corners only, and are
+    Delaunay among the border cells too.  Likewise a nearest known cell of an
+    empty cell outside the hull is a border cell (a neighbour would be nearer),
+    and the hull's corners are border cells.  The jitter keeps these margins.
     """
     known = np.isfinite(grid)
     nk = int(known.sum())
     if nk == 0 or nk == grid.size:
         return grid.copy()
+    use = known
+    if not all_known:
+        near = ndimage.binary_dilation(~known, structure=np.ones((3, 3), dtype=bool))
+        near[0, :] = near[-1, :] = near[:, 0] = near[:, -1] = True
+        use = known & near
+    ii, jj = np.nonzero(use)
+    di, dj = _cell_jitter(ii, jj)
+    pts = np.column_stack([(jj + 0.5 + INPAINT_JITTER * dj) * spec.cell, (ii + 0.5 + INPAINT_JITTER * di) * spec.cell])
     out = grid.copy()
-    ii, jj = np.nonzero(known)
-    if xy is None:
-        pts = np.column_stack([(jj + 0.5) * spec.cell, (ii + 0.5) * spec.cell])
-    else:
-        pts = xy
-    vals = grid[known]
     mi, mj = np.nonzero(~known)
     q = np.column_stack([(mj + 0.5) * spec.cell, (mi + 0.5) * spec.cell])
-    out[mi, mj] = tin_interpolate(pts, vals, q, joggle=xy is None)
+    out[mi, mj] = tin_interpolate(pts, grid[use], q)
     return out
 
 

@@ -93,15 +93,15 @@ def _walk(px, py, simp, neigh, vals, qx, qy, start, max_steps, out, found):
 
 
 def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, nearest_outside: bool = True,
-                    joggle: bool = False, max_points: int | None = None, workers: int | None = None) -> np.ndarray:
+                    max_points: int | None = None, workers: int | None = None) -> np.ndarray:
     """Linear (TIN) interpolation of ``values`` known at ``xy`` (n×2) at ``query`` (m×2).
 
     Queries outside the convex hull get the value of the nearest known point
     when ``nearest_outside`` (else NaN).  Fewer than 3 points or collinear
     points fall back to the nearest value everywhere.  Coordinates should be
-    local (small numbers) for accuracy.  ``joggle`` triangulates with
-    Qhull's ``QJ`` option: about twice as fast on regular grids (many
-    cocircular points), for inputs without duplicate xy.
+    local (small numbers) for accuracy.  Regular grids, with their many
+    cocircular points, are better jittered first (:func:`lidarfx.ground.grid.inpaint`):
+    Qhull is then about twice as fast and the triangulation unique.
 
     ``max_points``: with more known points than this, the queries are answered
     tile by tile from the Delaunay triangulation of the known points in the tile
@@ -121,12 +121,12 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     values = np.ascontiguousarray(values, dtype=np.float64)
     query = np.ascontiguousarray(query, dtype=np.float64)
     if max_points is not None and len(xy) > max(int(max_points), 3) and len(query):
-        return _tin_tiled(xy, values, query, nearest_outside, joggle, int(max_points),
+        return _tin_tiled(xy, values, query, nearest_outside, int(max_points),
                           TIN_TILE_WORKERS if workers is None else max(int(workers), 1))
-    return _tin_one(xy, values, query, nearest_outside, joggle)[0]
+    return _tin_one(xy, values, query, nearest_outside)[0]
 
 
-def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
+def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool,
              box: tuple[float, float, float, float] | None = None, hull: tuple | None = None,
              extent: tuple[np.ndarray, np.ndarray] | None = None,
              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
@@ -144,7 +144,7 @@ def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outs
     tri = None
     if len(xy) >= 3:
         try:
-            tri = Delaunay(xy, qhull_options="Qbb Qc Qz Q12 QJ" if joggle else None)
+            tri = Delaunay(xy)
         except (QhullError, ValueError):
             tri = None
     found = np.full(len(query), -1, dtype=np.int64)
@@ -233,7 +233,7 @@ def _outside_hull(hull: tuple | None, query: np.ndarray) -> np.ndarray:
 _FEW = 64  # when at most this many queries of a tile are left, they are retried on the area they need
 
 
-def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool, joggle: bool,
+def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outside: bool,
                max_points: int, workers: int = 1) -> np.ndarray:
     out = np.full(len(query), np.nan)
     lo, hi = xy.min(axis=0), xy.max(axis=0)
@@ -254,11 +254,11 @@ def _tin_tiled(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_ou
         whole_tile = True
         while len(todo):
             if box[0] <= lo[0] and box[1] <= lo[1] and box[2] >= hi[0] and box[3] >= hi[1]:
-                out[todo] = _tin_one(xy, values, query[todo], nearest_outside, joggle)[0]  # all points
+                out[todo] = _tin_one(xy, values, query[todo], nearest_outside)[0]  # all points
                 break
             sel = np.flatnonzero((xy[:, 0] >= box[0]) & (xy[:, 0] <= box[2])
                                  & (xy[:, 1] >= box[1]) & (xy[:, 1] <= box[3]))
-            v, ok, need = _tin_one(xy[sel], values[sel], query[todo], nearest_outside, joggle, box, hull, (lo, hi))
+            v, ok, need = _tin_one(xy[sel], values[sel], query[todo], nearest_outside, box, hull, (lo, hi))
             out[todo[ok]] = v[ok]
             todo, need = todo[~ok], need[~ok]
             if whole_tile and 0 < len(todo) <= _FEW:  # a few left (circles reaching beyond the tile): next
