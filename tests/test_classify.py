@@ -125,6 +125,37 @@ def test_training_ignores_unlisted_classes_and_merges(facades):
     assert acc > 0.95
 
 
+def test_boosting_fit_is_the_same_on_any_number_of_threads(monkeypatch):
+    import os
+
+    import lidarfx.classify.model as model_module
+    from lidarfx.classify.model import TrainConfig, idle_cores
+
+    cores = len(os.sched_getaffinity(0))
+    assert 1 <= idle_cores() <= cores
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(3000, 12))
+    y = (X[:, 0] + X[:, 1] * X[:, 2] > 0).astype(int) + (X[:, 3] > 1)
+    one = TrainConfig(n_jobs=1, n_estimators=40).fit_matrix(X, y).predict_proba(X)
+    two = TrainConfig(n_jobs=2, n_estimators=40).fit_matrix(X, y).predict_proba(X)
+    assert np.array_equal(one, two)
+    # the default asks how many cores are idle and fits on that many threads
+    from threadpoolctl import threadpool_info
+
+    seen = []
+    monkeypatch.setattr(model_module, "idle_cores", lambda: 1)  # as if the other cores were busy
+    real_fit = model_module.make_classifier("hgb").__class__.fit
+
+    def spy(self, *a, **k):
+        seen.append([i["num_threads"] for i in threadpool_info() if i["user_api"] == "openmp"])
+        return real_fit(self, *a, **k)
+
+    monkeypatch.setattr(model_module.make_classifier("hgb").__class__, "fit", spy)
+    auto = TrainConfig(n_estimators=40).fit_matrix(X, y).predict_proba(X)
+    assert np.array_equal(one, auto)
+    assert seen and seen[0] and all(n == 1 for n in seen[0])
+
+
 # --------------------------------------------------------------------------- folds
 def test_block_folds_keep_blocks_whole_random_folds_do_not():
     rng = np.random.default_rng(0)

@@ -104,7 +104,8 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
                    help="read neighbourhood features from the files' attributes instead of computing them")
     g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier")
     g.add_argument("--jobs", type=int, default=None,
-                   help="threads of the classifier fit (rf: all cores; hgb: 1 by default, see docs)")
+                   help="threads of the classifier fit (rf: all cores; hgb: the cores idle when the fit "
+                        "starts, see docs)")
 
 
 def _fractions(text: str | None) -> list[float] | None:
