@@ -133,6 +133,9 @@ def test_boosting_fit_is_the_same_on_any_number_of_threads(monkeypatch):
 
     cores = len(os.sched_getaffinity(0))
     assert 1 <= idle_cores() <= cores
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")  # the user's limit holds
+    assert idle_cores() == 1
+    monkeypatch.delenv("OMP_NUM_THREADS")
     rng = np.random.default_rng(3)
     X = rng.normal(size=(3000, 12))
     y = (X[:, 0] + X[:, 1] * X[:, 2] > 0).astype(int) + (X[:, 3] > 1)

@@ -197,18 +197,24 @@ def _fit_threads(cfg: "TrainConfig"):
 
 
 def idle_cores(samples: int = 5, interval: float = 0.01) -> int:
-    """Cores of this process's CPU set that no other task is running on now (at least 1).
+    """Cores this process may use that no other task is running on now (at least 1).
 
-    Linux: the kernel's count of runnable tasks (``/proc/loadavg``, 4th field,
-    which counts the reader itself), the smallest of ``samples`` readings
+    The cores: joblib's count (CPU affinity and container CPU quotas), at most
+    ``OMP_NUM_THREADS`` when that is set.  Busy ones, on Linux: the kernel's count
+    of runnable tasks (``/proc/loadavg``, 4th field, which counts the reader
+    itself; in a container, the host's), the smallest of ``samples`` readings
     ``interval`` seconds apart, so that short bursts (and this process's own
     threads winding down) do not count.  Elsewhere: one core (no reliable
     instantaneous load).  A process that starts later is not seen.
     """
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # pragma: no cover - not Linux
+    if not hasattr(os, "sched_getaffinity"):  # pragma: no cover - not Linux
         return 1
+    from joblib import cpu_count
+
+    cores = int(cpu_count())
+    omp = os.environ.get("OMP_NUM_THREADS", "").split(",")[0].strip()  # "4,2": nested levels
+    if omp.isdigit() and int(omp) > 0:
+        cores = min(cores, int(omp))
     if cores < 2:
         return 1
     busy = None
