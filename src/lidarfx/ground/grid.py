@@ -107,7 +107,8 @@ def inpaint(grid: np.ndarray, spec: GridSpec, *, all_known: bool = False) -> np.
     among their 8 neighbours or on the edge of the grid.  The answer is the same
     as from all known cells (``all_known=True``, for tests).  Proof: let a known
     cell v have 8 known neighbours and let an empty cell e lie in a Delaunay
-    triangle with corner v.  e is at least 2 cells from v, so the triangle's
+    triangle with corner v.  e is at least 2 cells from v (not √2: that is why
+    all 8 neighbours, not 4, must be known), so the triangle's
     circumcircle, which passes through v and holds e, has a radius R ≥ 1 cell.
     A neighbour at distance 1 in the direction within 45° of the circle's centre
     (angle θ) lies inside it, since 1 < 2R·cos θ — the triangle is not Delaunay.
