@@ -143,17 +143,18 @@ def test_boosting_fit_is_the_same_on_any_number_of_threads(monkeypatch):
     two = TrainConfig(n_jobs=2, n_estimators=40).fit_matrix(X, y).predict_proba(X)
     assert np.array_equal(one, two)
     # the default asks how many cores are idle and fits on that many threads
+    from sklearn.ensemble import HistGradientBoostingClassifier
     from threadpoolctl import threadpool_info
 
     seen = []
     monkeypatch.setattr(model_module, "idle_cores", lambda: 1)  # as if the other cores were busy
-    real_fit = model_module.make_classifier("hgb").__class__.fit
+    real_fit = HistGradientBoostingClassifier.fit
 
     def spy(self, *a, **k):
         seen.append([i["num_threads"] for i in threadpool_info() if i["user_api"] == "openmp"])
         return real_fit(self, *a, **k)
 
-    monkeypatch.setattr(model_module.make_classifier("hgb").__class__, "fit", spy)
+    monkeypatch.setattr(HistGradientBoostingClassifier, "fit", spy)
     auto = TrainConfig(n_estimators=40).fit_matrix(X, y).predict_proba(X)
     assert np.array_equal(one, auto)
     assert seen and seen[0] and all(n == 1 for n in seen[0])
