@@ -960,7 +960,7 @@ def ign_result():
 def test_ign_default_pipeline_regression(ign_result):
     """Train on the three IGN tiles, test on crop_1 + pont (classes 2 / 3+4+5 / 6, others ignored).
 
-    Measured (docs/classification.md): OA 0.954, mean F1 0.937, ≈ 56 s; the usual
+    Measured (docs/classification.md §7, run 8): OA 0.955, mean F1 0.944, ≈ 30 s; the usual
     pipeline (jakteristics 1/2/3 m + z + balanced RF) gets OA 0.43 on this split.
     """
     sec, seconds = ign_result
@@ -973,7 +973,7 @@ def test_ign_default_pipeline_regression(ign_result):
 @pytest.mark.slow
 @needs_ign
 @pytest.mark.xfail(reason="issue 5 target OA >= 0.965 / mean F1 >= 0.95 not reached on crop_1 + pont "
-                          "(0.954 / 0.937): sloped, vegetated ground in pont (docs/classification.md)", strict=False)
+                          "(0.955 / 0.944): sloped, vegetated ground in pont (docs/classification.md)", strict=False)
 def test_ign_acceptance_target(ign_result):
     m = ign_result[0]["metrics"]
     assert m["oa"] >= 0.965 and m["mean_f1"] >= 0.95, m

@@ -110,3 +110,24 @@ def hull_area_in_plane(points: np.ndarray, normal: Any) -> float:
         return float(ConvexHull(uv).volume)  # in 2-D, 'volume' is the area
     except (QhullError, ValueError):
         return 0.0
+
+
+def group_hull_areas(xy: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """Area (m²) of the 2-D convex hull of each group of points: ``groups`` holds ids
+    0 … k−1 per point, the result one area per id (0 for fewer than three points or
+    collinear ones).  Coordinates are taken relative to each group's first point."""
+    from ._hullkernel import hull_areas
+
+    xy = np.asarray(xy, dtype=np.float64)
+    groups = np.asarray(groups, dtype=np.int64)
+    if xy.ndim != 2 or xy.shape[1] < 2 or len(groups) != len(xy):
+        raise LidarfxError("group_hull_areas needs (n, 2) coordinates and one group id per point")
+    k = int(groups.max()) + 1 if len(groups) else 0
+    order = np.lexsort((xy[:, 1], xy[:, 0], groups))
+    g = groups[order]
+    starts = np.searchsorted(g, np.arange(k), side="left")
+    ends = np.searchsorted(g, np.arange(k), side="right")
+    first = order[np.minimum(starts, max(len(order) - 1, 0))] if len(order) else order
+    x = xy[order, 0] - xy[first, 0][g]
+    y = xy[order, 1] - xy[first, 1][g]
+    return hull_areas(x, y, starts.astype(np.int64), ends.astype(np.int64))

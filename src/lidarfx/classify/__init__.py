@@ -10,6 +10,7 @@ Public API
 :class:`ClassMap`              class merging / ignoring (``"2,3+4+5,6"``)
 :func:`evaluate`               CV (random and buffered spatial-block folds), leave-one-file-out, transfer
 :func:`metrics`                OA, kappa, PA, UA, F1, IoU from a confusion matrix
+:func:`drop_small_objects`     the object-size rule of prediction (small "building" clusters)
 
 See ``docs/classification.md``.
 """
@@ -30,6 +31,7 @@ from .evaluate import (
     write_report,
 )
 from .importance import backward_elimination, impurity_importance, permutation_importance
+from .objects import drop_small_objects
 from .model import TRUSTED_TYPES, ClassifierModel, TrainConfig, load_model, read_sources, train
 from .pipeline import (
     CLASSIFIERS,
@@ -52,7 +54,7 @@ __all__ = [
     "format_report", "metrics",
     "plot_confusion", "random_folds", "write_report",
     "backward_elimination", "impurity_importance", "permutation_importance",
-    "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",
+    "drop_small_objects", "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",
     "CLASSIFIERS", "DEFAULT_FEATURES", "DEFAULT_RADII", "EXTRA_INPUTS", "CloudSample", "LidarFeatures",
     "balanced_sample", "make_classifier", "make_pipeline", "pulse_heights", "pulse_ids", "usable_mask",
 ]

@@ -40,6 +40,7 @@ from .model import (
     train,
 )
 from .fastpredict import predict as fast_predict
+from .objects import building_class
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask",
@@ -255,6 +256,7 @@ def fold_parts(folds: np.ndarray, y: np.ndarray, f: int, exclude: np.ndarray | N
 def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: TrainConfig, n_classes: int,
                    log: Callable[[str], None] | None = None, X_aug: Sequence[np.ndarray] = (),
                    exclude: np.ndarray | None = None,
+                   post: Callable[[int, Any, np.ndarray], np.ndarray] | None = None,
                    ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
     """Train on all folds but one (balanced sample, as :func:`train` does), predict the
     held-out fold, for every fold.  ``X_aug``: features of the same points in
@@ -262,7 +264,9 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
     the points (thinned copies: row ``j`` of ``Xa`` is point ``rows[j]``); the
     training part of each fold adds a balanced sample of them like :func:`train`.
     ``exclude``: ``(n_folds, n)`` bool, points left out of fold ``f``'s training part
-    (:func:`block_buffer_mask`, :func:`file_buffer_mask`).  Returns the summed confusion matrix,
+    (:func:`block_buffer_mask`, :func:`file_buffer_mask`).  ``post(f, estimator, held_out)``,
+    when given, replaces the plain prediction of the held-out points (class indices;
+    e.g. the object-size rule, :class:`HeldOutRule`).  Returns the summed confusion matrix,
     per-fold results and
     the fitted estimators with their held-out indices."""
     from .model import _aug_cap
@@ -289,7 +293,7 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
             sa = tr[balanced_sample(y[tr], _aug_cap(config), config.seed + 1 + a)]
             Xf, yf = np.vstack([Xf, Xa[sa]]), np.concatenate([yf, y[sa]])
         est = config.fit_matrix(Xf, yf)
-        pred = fast_predict(est, X[te])
+        pred = fast_predict(est, X[te]) if post is None else post(int(f), est, te)
         c = confusion_matrix(y[te], pred, n_classes)
         cm += c
         m = metrics(c)
@@ -304,6 +308,92 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
             log(f"  fold {int(f)}: train {len(yf):,}{copies} / test {len(te):,} points, OA {m['oa']:.4f}, "
                 f"mean F1 {m['mean_f1']:.4f}")
     return cm, per_fold, fitted
+
+
+class HeldOutRule:
+    """The object-size rule of prediction (:mod:`.objects`) inside cross-validation.
+
+    A model applies the rule to every usable point of a cloud, so a held-out part
+    is predicted the same way: its labelled points together with the *context*
+    points of the same part (usable points outside the class map, e.g. IGN 1 and
+    64), one file at a time, with the link of the file's density.  The held-out
+    part's edge is then the edge of its blocks (of its file): a building cut by a
+    block edge is kept, as one cut by a tile edge is.  Only the labelled points are
+    counted.  ``stats`` sums the rule's counts per section."""
+
+    def __init__(self, sources: list[Source], cmap: ClassMap, config: TrainConfig, labelled: tuple,
+                 X: np.ndarray, target: int, progress: bool | None = False) -> None:
+        from .model import cloud_density
+        from .objects import link_for
+
+        idxs, y, _, g = labelled
+        self.target, self.area = target, float(config.min_building_area)
+        tr = config.transformer(progress=progress)
+        xyz_l, xyz_c, Xc, g_c = [], [], [], []
+        self.link = []
+        for i, (s, idx) in enumerate(zip(sources, idxs)):
+            u = unit_to_metre(s.cloud)
+            ctx = np.flatnonzero(_labels(s, cmap) < 0)
+            xyz_l.append(s.cloud.xyz[idx] * u)
+            xyz_c.append(s.cloud.xyz[ctx] * u)
+            Xc.append(tr.transform(CloudSample(s.cloud, ctx)) if len(ctx) else
+                      np.empty((0, len(config.feature_names())), np.float32))
+            g_c.append(np.full(len(ctx), i, np.int64))
+            self.link.append(link_for(cloud_density(s.cloud)))
+        self.X, self.xyz, self.g = X, np.vstack(xyz_l), g
+        self.xyz_c, self.X_c, self.g_c = np.vstack(xyz_c), np.vstack(Xc), np.concatenate(g_c)
+        self.folds_c = np.full(len(self.g_c), -1, np.int64)
+        self.stats: dict[str, int] = {}
+
+    def set_folds(self, kind: str, folds: np.ndarray, cv: int = 3, seed: int = 0, block_size: float = 0.0) -> None:
+        """Assign the context points to the folds of one CV run: ``random`` (at random),
+        ``blocks`` (the fold of their block; −1 in a block without labelled points),
+        ``files`` (their file)."""
+        n = len(self.g_c)
+        self.stats = {}
+        if kind == "files":
+            self.folds_c = self.g_c.copy()
+        elif kind == "random":
+            self.folds_c = np.random.default_rng(seed).integers(0, cv, n) if n else np.zeros(0, np.int64)
+        else:
+            def keys(xy, g):  # block_folds' blocks, as integers
+                return np.stack([g, np.floor(xy[:, 0] / block_size).astype(np.int64),
+                                 np.floor(xy[:, 1] / block_size).astype(np.int64)], 1)
+            kl, kc = keys(self.xyz, self.g), keys(self.xyz_c, self.g_c)
+            uk, first = np.unique(kl, axis=0, return_index=True)
+            self.folds_c = np.full(n, -1, np.int64)
+            if n:
+                # a row view makes the block keys searchable
+                view = np.dtype((np.void, uk.dtype.itemsize * 3))
+                ukv = np.ascontiguousarray(uk).view(view).ravel()
+                kcv = np.ascontiguousarray(kc).view(view).ravel()
+                order = np.argsort(ukv)
+                pos = np.minimum(np.searchsorted(ukv[order], kcv), len(uk) - 1)
+                hit = ukv[order][pos] == kcv
+                self.folds_c[hit] = folds[first[order[pos[hit]]]]
+
+    def __call__(self, f: int, est: Any, te: np.ndarray) -> np.ndarray:
+        from .fastpredict import predict_proba
+        from .objects import drop_small_objects
+
+        ctx = np.flatnonzero(self.folds_c == f)
+        P = predict_proba(est, self.X_c[ctx]) if len(ctx) else np.empty((0, 0))
+        P_te = predict_proba(est, self.X[te])
+        out = P_te.argmax(axis=1)
+        for i in np.unique(self.g[te]):
+            a = np.flatnonzero(self.g[te] == i)
+            c = ctx[self.g_c[ctx] == i]
+            Q = np.vstack([P_te[a], P[self.g_c[ctx] == i]]) if len(c) else P_te[a]
+            k = Q.argmax(axis=1)
+            R = Q.copy()
+            R[:, self.target] = -1.0
+            st: dict[str, int] = {}
+            new = drop_small_objects(k, R.argmax(axis=1), np.vstack([self.xyz[te[a]], self.xyz_c[c]]),
+                                     self.target, self.area, link=self.link[i], stats=st)
+            out[a] = new[: len(a)]
+            for key, v in st.items():
+                self.stats[key] = self.stats.get(key, 0) + v
+        return out
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -357,7 +447,8 @@ def _out_dir(out_dir: str | os.PathLike, create: bool = True) -> Path:
 
 def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | None = False,
                    log: Callable[[str], None] | None = None,
-                   maps_dir: str | os.PathLike | None = None) -> dict[str, Any]:
+                   maps_dir: str | os.PathLike | None = None,
+                   min_building_area: float | None = None) -> dict[str, Any]:
     """Metrics of a trained model on labelled clouds: per file and pooled.
 
     Every usable point is classified (features use all of them as neighbours);
@@ -365,6 +456,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     With ``maps_dir``, a plan-view error map ``errors_<file>.png`` of every file
     is written there (:func:`lidarfx.render.error_map`; its path in the file's
     ``error_map``, the points of its error pairs in ``error_pairs``).
+    ``min_building_area``: overrides the model's object-size rule (:meth:`ClassifierModel.predict`).
     """
     maps = _out_dir(maps_dir, create=False) if maps_dir is not None else None  # refused before any work
     srcs = read_sources(sources, progress=progress)
@@ -385,7 +477,9 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
             warnings.warn(msg + "; not counted", LidarfxWarning, stacklevel=2)
             continue
         dens = model.density_check(s.cloud, s.name)
-        codes = model.predict(s.cloud, progress=progress, check_density=False)
+        rule: dict[str, Any] = {}
+        codes = model.predict(s.cloud, progress=progress, check_density=False,
+                              min_building_area=min_building_area, stats=rule)
         pred = cmap.index_of(np.clip(codes, 0, 255))
         cm = confusion_matrix(y, np.where(y >= 0, pred, 0), k)
         total += cm
@@ -394,6 +488,9 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         m["ignored_points"] = int((y < 0).sum())
         m["unusable_points"] = int(s.n_total - len(s.cloud))
         m["density"] = dens
+        if rule:
+            m["small_buildings"] = {"min_building_area": model.min_building_area if min_building_area is None
+                                    else float(min_building_area), **rule}
         if maps is not None:
             from ..render import error_map
 
@@ -519,6 +616,10 @@ def evaluate(
                          {"files": [s.name for s in srcs], "buffer": buf}))
         t0 = time.perf_counter()
         X = _file_features(srcs, cmap, cfg, progress, labelled)[0]
+        rule = None
+        target = building_class(cmap) if cfg.min_building_area > 0 else None
+        if target is not None:  # the held-out parts are classified as a model classifies a cloud
+            rule = HeldOutRule(srcs, cmap, cfg, labelled, X, target, progress)
         X_aug = [_file_features(copies, cmap, cfg, progress)[0] for copies in sheared_sources(srcs, cfg)]
         X_aug += [_thinned_features(srcs, copies, cmap, cfg, progress) for copies in thinned_sources(srcs, cfg)]
         report["seconds"]["cv_features"] = round(time.perf_counter() - t0, 3)
@@ -527,14 +628,20 @@ def evaluate(
         for key, title, folds, extra in runs:
             t0 = time.perf_counter()
             say(f"{title}:")
+            if rule is not None:
+                rule.set_folds({"cv_random": "random", "cv_blocks": "blocks"}.get(key, "files"), folds,
+                               int(cv or 0), cv_seed, float(block_size or 0))
             cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug,
-                                                  exclude=near.get(key))
+                                                  exclude=near.get(key), post=rule)
             if key == "leave_one_file_out":
                 for pf in per_fold:
                     pf["file"] = srcs[pf["fold"]].name
             report["sections"][key] = {"title": title, **extra, "folds": per_fold,
                                        "metrics": _metrics_for(cm, cmap),
                                        "seconds": round(time.perf_counter() - t0, 3)}
+            if rule is not None:
+                report["sections"][key]["small_buildings"] = {"min_building_area": cfg.min_building_area,
+                                                              **rule.stats}
             if key == "cv_blocks":
                 fitted_blocks = fitted
         if importance:

@@ -10,6 +10,7 @@ any other type is refused before anything in it is built.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 import time
 import warnings
@@ -73,6 +74,11 @@ TRUSTED_TYPES: tuple[str, ...] = (
 
 DEFAULT_MAX_PER_CLASS = 20_000
 
+#: predicted-building clusters with a smaller plan footprint (m²) are given their next most
+#: probable class (:mod:`.objects`); chosen on the training tiles (docs/classification.md §6.13).
+#: Part of the ALS default: with a feature list of one's own (e.g. TLS) the rule is off unless asked for
+DEFAULT_MIN_BUILDING_AREA = 10.0
+
 #: prediction computes and classifies the features of this many points at a time: the feature
 #: matrix of a whole 40-million-point tile (81 float32 columns) would need 13 GB; a chunk needs 0.3 GB
 PREDICT_CHUNK = 1_000_000
@@ -112,6 +118,7 @@ class TrainConfig:
     balance: bool = True
     seed: int = 0
     n_jobs: int | None = None
+    min_building_area: float | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.features, str):
@@ -139,6 +146,11 @@ class TrainConfig:
                                    f"got {self.density_augment}")
         else:
             self.density_augment = None
+        if self.min_building_area is None:  # auto: part of the ALS default only (docs/classification.md §2)
+            self.min_building_area = DEFAULT_MIN_BUILDING_AREA if self.features is None else 0.0
+        self.min_building_area = float(self.min_building_area)
+        if not (self.min_building_area >= 0 and math.isfinite(self.min_building_area)):
+            raise LidarfxError(f"min_building_area must be a number of m² >= 0, got {self.min_building_area}")
         if self.max_per_class is not None and int(self.max_per_class) < 1:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
         make_classifier(self.classifier)  # validates the kind
@@ -364,6 +376,7 @@ class ClassifierModel:
             "class_spec": self.classes.spec(),
             "features": self.feature_names,
             "radii": self.radii,
+            "min_building_area": self.min_building_area,
             "config": self.meta["config"],
             "training_files": tr.get("files", []),
             "training_density": self.training_density,
@@ -448,25 +461,67 @@ class ClassifierModel:
             proba[rows] = self._proba_matrix(X)
         return proba, usable
 
+    @property
+    def min_building_area(self) -> float:
+        """Minimum plan area (m²) of a predicted building cluster (:mod:`.objects`; 0 = no rule;
+        models written before the rule existed have 0)."""
+        return float(self.meta["config"].get("min_building_area") or 0.0)
+
+    def set_min_building_area(self, area: float) -> None:
+        """Change the object-size rule of this model (m²; 0 = off); kept when the model is saved."""
+        area = float(area)
+        if not (area >= 0 and math.isfinite(area)):
+            raise LidarfxError(f"the minimum building area must be a number of m² >= 0, got {area}")
+        self.meta = {**self.meta, "config": {**self.meta["config"], "min_building_area": area}}
+
     def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False,
-                check_density: bool = True):
+                check_density: bool = True, min_building_area: float | None = None,
+                stats: dict | None = None):
         """Output class code of every point (int16); −1 where not predicted (virtual /
-        withheld / synthetic points).  With ``return_confidence`` also the highest
-        class probability (float32, NaN where not predicted).  ``check_density``:
-        warn when the cloud is much sparser than the training data (:meth:`density_check`)."""
+        withheld / synthetic points).  With ``return_confidence`` also the probability of
+        the class given (float32, NaN where not predicted).  ``check_density``:
+        warn when the cloud is much sparser than the training data (:meth:`density_check`).
+
+        Predicted-building clusters smaller than ``min_building_area`` m² (default: the
+        model's, :attr:`min_building_area`; 0 = off) that do not reach the cloud's edge
+        get their next most probable class (:func:`.objects.drop_small_objects`; its
+        counts go into ``stats``).  :meth:`predict_proba` returns the probabilities
+        before this rule."""
+        from .objects import building_class, drop_small_objects, link_for
+
         if check_density:
             self.density_check(cloud)
+        area = self.min_building_area if min_building_area is None else float(min_building_area)
+        target = building_class(self.classes) if area > 0 else None
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
         k = np.empty(len(sub), dtype=np.int64)
         best = np.empty(len(sub), dtype=np.float32) if return_confidence else None
+        alt = np.empty(len(sub), dtype=np.int16) if target is not None else None
+        alt_p = np.empty(len(sub), dtype=np.float32) if (alt is not None and best is not None) else None
         for rows, X in self.feature_chunks(sub, progress=progress):  # bounded memory on large clouds
-            if best is not None:
-                proba = self._proba_matrix(X)
-                k[rows] = proba.argmax(axis=1)
-                best[rows] = proba[np.arange(len(proba)), k[rows]]
-            else:
+            if best is None and alt is None:
                 k[rows] = self._predict_matrix(X)
+                continue
+            proba = self._proba_matrix(X)
+            k[rows] = proba.argmax(axis=1)
+            if best is not None:
+                best[rows] = proba[np.arange(len(proba)), k[rows]]
+            if alt is not None:
+                proba[:, target] = -1.0
+                alt[rows] = proba.argmax(axis=1)
+                if alt_p is not None:
+                    alt_p[rows] = proba.max(axis=1)
+        if target is not None:
+            u = unit_to_metre(sub)
+            xyz = sub.xyz * u if u != 1.0 else sub.xyz
+            new = drop_small_objects(k, alt, xyz, target, area, link=link_for(point_density(xyz)), stats=stats)
+            if alt_p is not None:
+                changed = new != k
+                best[changed] = alt_p[changed]
+            k = new
+        elif stats is not None:
+            stats.clear()
         codes = np.full(len(cloud), -1, dtype=np.int16)
         codes[usable] = self.classes.code_of(k)
         if best is None:
@@ -481,7 +536,9 @@ class ClassifierModel:
         float32 ``confidence`` attribute (highest class probability)."""
         warn_unusable(cloud, usable_mask(cloud), str(cloud.meta.get("source") or cloud.meta.get("name") or "the cloud"))
         dens = self.density_check(cloud)
-        res = self.predict(cloud, progress=progress, return_confidence=confidence, check_density=False)
+        rule: dict[str, Any] = {}
+        res = self.predict(cloud, progress=progress, return_confidence=confidence, check_density=False,
+                           stats=rule)
         codes, conf = res if confidence else (res, None)
         out = cloud.copy() if hasattr(cloud, "copy") else PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
         old = out.get("classification")
@@ -491,7 +548,9 @@ class ClassifierModel:
             out["confidence"] = conf
         out.meta = {**out.meta, "classify": {"model_classes": self.classes.spec(),
                                              "predicted_points": int((codes >= 0).sum()),
-                                             "density": dens}}
+                                             "density": dens,
+                                             "min_building_area": self.min_building_area,
+                                             "small_buildings": rule or None}}
         return out
 
     # ------------------------------------------------------------------ persistence

@@ -102,6 +102,11 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
     g.add_argument("--precomputed", action="store_true",
                    help="read neighbourhood features from the files' attributes instead of computing them")
+    g.add_argument("--min-building-area", type=float, default=None, metavar="M2",
+                   help="predicted-building clusters (points 1 m apart linked) with a smaller plan footprint "
+                        "(convex hull, m²) that do not reach the cloud's edge get their next most probable "
+                        "class; 0 = off; stored in the model; default 10 with the default features (ALS), "
+                        "0 with --features")
     g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier")
     g.add_argument("--jobs", type=int, default=None,
                    help="threads of the classifier fit (rf: all cores; hgb: the cores idle when the fit "
@@ -157,6 +162,8 @@ def register(sub) -> None:
                          "provider's ground classification) instead of the SMRF filter; default: the model's")
     pr.add_argument("--picture", default=None, metavar="PNG",
                     help="also write a plan-view map of the predicted classes (class of the highest point per cell)")
+    pr.add_argument("--min-building-area", type=float, default=None, metavar="M2",
+                    help="object-size rule for buildings (see 'classify train --help'); 0 = off; default: the model's")
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
@@ -232,6 +239,7 @@ def _config(args):
         balance=not args.no_balance,
         seed=args.seed,
         n_jobs=args.jobs,
+        **({} if args.min_building_area is None else {"min_building_area": args.min_building_area}),
     )
 
 
@@ -288,6 +296,8 @@ def run_predict(args) -> int:
     cloud = io.read(args.input, progress=False if args.quiet else None)
     model.check(cloud, args.input)
     t1 = time.perf_counter()
+    if args.min_building_area is not None:
+        model.set_min_building_area(args.min_building_area)
     out = model.classify(cloud, confidence=args.confidence, progress=False if args.quiet else None)
     t2 = time.perf_counter()
     io.write(out, args.output, progress=False if args.quiet else None)
@@ -307,6 +317,8 @@ def run_predict(args) -> int:
     summary = {"input": args.input, "output": args.output, "model": args.model, "points": len(out),
                "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
                "density": out.meta["classify"].get("density"), "ground": model.features.ground,
+               "min_building_area": model.min_building_area,
+               "small_buildings": out.meta["classify"].get("small_buildings"),
                "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:
@@ -344,6 +356,8 @@ def model_table(m: dict):
     t.add_row("classes", "\n".join(f"{c['name']:<14} codes {'+'.join(map(str, c['codes'])):<10} -> {c['output_code']}"
                                    for c in m["classes"]))
     t.add_row("features", f"{len(m['features'])} columns; radii {', '.join(f'{r:g}' for r in m['radii'])} m")
+    area = m.get("min_building_area") or 0
+    t.add_row("small buildings", f"clusters under {area:g} m² get their next class" if area else "no object-size rule")
     cfg = m["config"]
     t.add_row("settings", f"ground {cfg['ground']}, HAG cap {cfg['hag_cap']}, max disc points "
                           f"{cfg['max_disc_points']}, terrain augment {cfg['terrain_augment']}, density augment "
@@ -372,6 +386,8 @@ def run_evaluate(args) -> int:
         model = load_model(args.model)
         if args.precomputed:
             model.features.precomputed = True
+        if args.min_building_area is not None:
+            model.set_min_building_area(args.min_building_area)
         sec = evaluate_model(model, args.files, log=say, maps_dir=args.out)
         report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
                   "config": model.meta["config"], "features": model.feature_names,
