@@ -241,3 +241,19 @@ def test_cli_min_building_area(tmp_path, capsys, town_model):
     assert s0["classes"].get(6, s0["classes"].get("6")) >= s["classes"].get(6, s["classes"].get("6"))
     assert main(["classify", "predict", str(src), str(out), "-m", str(m), "-q", "--min-building-area", "-3"]) == 2
     assert "minimum building area" in capsys.readouterr().err
+
+
+def test_evaluate_reports_the_rule():
+    from lidarfx.classify import evaluate, format_report
+
+    rep = evaluate([_town(6), _town(7)], classes="ground=2,vegetation=5,building=6", cv=None, leave_one_out=True,
+                   buffer=0, features="eigen,plane,height_above_ground", radii=[1.0, 2.0], max_per_class=2000,
+                   terrain_augment=0, classifier="rf", n_estimators=10, min_building_area=10)
+    sb = rep["sections"]["leave_one_file_out"]["small_buildings"]
+    assert sb["min_building_area"] == 10.0 and sb["components"] >= 6  # three houses per file at least
+    assert f"{sb['relabelled_components']:,} of {sb['components']:,} predicted-building clusters" in format_report(rep)
+    rep0 = evaluate([_town(6), _town(7)], classes="ground=2,vegetation=5,building=6", cv=None, leave_one_out=True,
+                    buffer=0, features="eigen,plane,height_above_ground", radii=[1.0, 2.0], max_per_class=2000,
+                    terrain_augment=0, classifier="rf", n_estimators=10)  # own features: no rule by default
+    assert "small_buildings" not in rep0["sections"]["leave_one_file_out"]
+    assert "small-building rule" not in format_report(rep0)

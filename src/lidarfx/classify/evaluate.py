@@ -710,6 +710,13 @@ def format_metrics(m: dict[str, Any], title: str | None = None) -> str:
     return "\n".join(lines)
 
 
+def _small_buildings_line(sb: dict[str, Any]) -> str:
+    return (f"small-building rule ({sb['min_building_area']:g} m², docs/classification.md §2): "
+            f"{sb.get('relabelled_components', 0):,} of {sb.get('components', 0):,} predicted-building clusters "
+            f"relabelled ({sb.get('relabelled_points', 0):,} points), {sb.get('kept_at_edge', 0):,} small ones "
+            "kept at the data's edge")
+
+
 def format_report(report: dict[str, Any]) -> str:
     """The whole report as text: one block per section, then importances."""
     out = [f"lidarfx {report.get('lidarfx_version', '')} classification report",
@@ -730,11 +737,15 @@ def format_report(report: dict[str, Any]) -> str:
             left = f", {pf['buffer_excluded']:,} training points in the buffer" if pf.get("buffer_excluded") else ""
             out.append(f"  {label}: test {pf['test_points']:,} points, OA {_f(pf['oa'])}, "
                        f"mean F1 {_f(pf['mean_f1'])}{left}")
+        if sec.get("small_buildings"):
+            out.append(_small_buildings_line(sec["small_buildings"]))
         if key == "test":
             for name, m in sec["files"].items():
                 d = m.get("density")
                 dens = (f" ({d['density']:.1f} pts/m², {d['ratio']:.2f} × the training density)" if d else "")
                 out.append(format_metrics(m, f"-- {Path(name).name}{dens}"))
+                if m.get("small_buildings"):
+                    out.append(_small_buildings_line(m["small_buildings"]))
             out.append(format_metrics(sec["metrics"], "-- all test files pooled"))
         else:
             out.append(format_metrics(sec["metrics"]))

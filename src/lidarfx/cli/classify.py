@@ -324,6 +324,10 @@ def run_predict(args) -> int:
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
         print()
+    sb = summary["small_buildings"]
+    if sb:
+        say(f"small-building rule ({model.min_building_area:g} m²): {sb['relabelled_components']:,} of "
+            f"{sb['components']:,} predicted-building clusters relabelled ({sb['relabelled_points']:,} points)")
     say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "
         + ", ".join(f"class {c} {n:,}" for c, n in counts.items()) + f" ({t3 - t0:.1f} s)")
     return 0
