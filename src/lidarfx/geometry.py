@@ -99,17 +99,12 @@ def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def hull_area_in_plane(points: np.ndarray, normal: Any) -> float:
     """Area (m²) of the 2-D convex hull of ``points`` projected onto the plane with ``normal``."""
-    from scipy.spatial import ConvexHull, QhullError
-
     p = np.asarray(points, dtype=np.float64)
     if len(p) < 3:
         return 0.0
     e1, e2, _ = plane_basis(normal)
     uv = np.c_[(p - p.mean(axis=0)) @ e1, (p - p.mean(axis=0)) @ e2]
-    try:
-        return float(ConvexHull(uv).volume)  # in 2-D, 'volume' is the area
-    except (QhullError, ValueError):
-        return 0.0
+    return float(group_hull_areas(uv, np.zeros(len(uv), np.int64))[0])
 
 
 def group_hull_areas(xy: np.ndarray, groups: np.ndarray) -> np.ndarray:
