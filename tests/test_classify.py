@@ -606,6 +606,7 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     assert main(["classify", "train", str(pa), "--model", str(model), *CLI_MODEL, "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["features"] == 52 and summary["radii"] == [0.3, 0.5]  # (14 eigen + 4 height + 8 plane) x 2
+    assert summary["min_building_area"] == 0.0  # own features (a TLS facade): no small-building rule
     out = d / "b_pred.laz"
     assert main(["classify", "predict", str(pb), str(out), "--model", str(model), "--confidence", "-q",
                  "--picture", str(d / "b_classes.png"), "--json"]) == 0

@@ -268,6 +268,7 @@ def run_train(args) -> int:
     model.save(args.model)
     summary = {"model": args.model, "classes": model.classes.spec(), "features": len(model.feature_names),
                "radii": model.radii, "classifier": model.meta["config"]["classifier"],
+               "min_building_area": model.min_building_area,
                "training": model.meta["training"], "seconds": round(time.perf_counter() - t0, 3)}
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
