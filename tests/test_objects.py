@@ -209,6 +209,13 @@ def test_cross_validation_applies_the_rule_per_held_out_part(town_model):
     y, g = lab[1], lab[3]
     rule = HeldOutRule(srcs, cmap, cfg, lab, X, 2)
     assert len(rule.X_c) == sum(len(np.asarray(c["classification"])[::50]) for c in clouds)
+    from lidarfx.classify import block_folds
+
+    fb, _ = block_folds(lab[2], 3, 20.0, 0, g)
+    rule.set_folds("blocks", fb, block_size=20.0)  # a context point joins the fold of its block
+    key = lambda xy, gg: [tuple(r) for r in np.c_[gg, np.floor(xy[:, :2] / 20.0)].astype(int)]
+    fold_of = dict(zip(key(rule.xyz, g), fb))
+    assert rule.folds_c.tolist() == [fold_of.get(k, -1) for k in key(rule.xyz_c, rule.g_c)]
     rule.set_folds("files", g)
     cm_rule, _, fitted = cross_validate(X, y, g, cfg, 3, post=rule)
     assert rule.stats["components"] > 0

@@ -359,18 +359,13 @@ class HeldOutRule:
             def keys(xy, g):  # block_folds' blocks, as integers
                 return np.stack([g, np.floor(xy[:, 0] / block_size).astype(np.int64),
                                  np.floor(xy[:, 1] / block_size).astype(np.int64)], 1)
-            kl, kc = keys(self.xyz, self.g), keys(self.xyz_c, self.g_c)
-            uk, first = np.unique(kl, axis=0, return_index=True)
-            self.folds_c = np.full(n, -1, np.int64)
-            if n:
-                # a row view makes the block keys searchable
-                view = np.dtype((np.void, uk.dtype.itemsize * 3))
-                ukv = np.ascontiguousarray(uk).view(view).ravel()
-                kcv = np.ascontiguousarray(kc).view(view).ravel()
-                order = np.argsort(ukv)
-                pos = np.minimum(np.searchsorted(ukv[order], kcv), len(uk) - 1)
-                hit = ukv[order][pos] == kcv
-                self.folds_c[hit] = folds[first[order[pos[hit]]]]
+            nl = len(self.g)
+            _, inv = np.unique(np.vstack([keys(self.xyz, self.g), keys(self.xyz_c, self.g_c)]), axis=0,
+                               return_inverse=True)
+            inv = inv.ravel()
+            fold_of_block = np.full(int(inv.max()) + 1, -1, np.int64)
+            fold_of_block[inv[:nl]] = folds  # a block lies in one fold
+            self.folds_c = fold_of_block[inv[nl:]]
 
     def __call__(self, f: int, est: Any, te: np.ndarray) -> np.ndarray:
         from .fastpredict import predict_proba
