@@ -484,6 +484,14 @@ def test_model_refuses_cloud_missing_a_feature(tmp_path):
     bare = lidarfx.PointCloud(xyz)
     with pytest.raises(LidarfxError, match="number_of_returns"):
         model.predict(bare)
+    with pytest.raises(LidarfxError, match="empty: no points to classify"):  # not "no number_of_returns"
+        model.predict(cloud.subset(np.zeros(n, bool)))
+    empty = tmp_path / "empty.laz"
+    lidarfx.write(cloud.subset(np.zeros(n, bool)), empty)
+    model.save(tmp_path / "m.skops")
+    assert main(["classify", "predict", str(empty), str(tmp_path / "o.laz"), "--model", str(tmp_path / "m.skops"),
+                 "-q"]) == 2
+    assert not (tmp_path / "o.laz").exists()
     # precomputed features at the wrong radius
     model.features.precomputed = True
     wrong = lidarfx.compute_features(cloud, "planarity", radii=[0.5, 2.0])

@@ -389,8 +389,11 @@ class ClassifierModel:
 
     # ------------------------------------------------------------------ prediction
     def check(self, cloud: PointCloud, name: str | None = None) -> None:
-        """Refuse a cloud the model cannot classify (missing fields or precomputed features)."""
-        self.features.check_cloud(cloud, name or str(cloud.meta.get("source") or "the cloud"))
+        """Refuse a cloud the model cannot classify (no points, missing fields or precomputed features)."""
+        name = name or str(cloud.meta.get("source") or "the cloud")
+        if len(cloud) == 0:
+            raise LidarfxError(f"{name} is empty: no points to classify")
+        self.features.check_cloud(cloud, name)
 
     @property
     def training_density(self) -> float | None:
