@@ -441,11 +441,36 @@ def test_info_on_cloud_counts_and_density():
     assert res["crs"] is None and res["las"] is None
 
 
+def test_info_measured_density_leaves_out_virtual_withheld_synthetic():
+    g = (np.arange(20) + 0.5) * 0.5  # 20 x 20 points, 0.5 m apart: 4 per occupied 1 m cell
+    x, y = np.meshgrid(g, g)
+    xyz = np.column_stack([x.ravel(), y.ravel(), np.zeros(400)])
+    rn = np.where(xyz[:, 0] < 5, 1, 0).astype(np.uint8)  # the right half virtual (return number 0)
+    withheld = np.zeros(400, np.uint8)
+    withheld[(xyz[:, 0] < 1) & (xyz[:, 1] < 1)] = 1  # one 1 m cell's 4 points
+    d = info(PointCloud(xyz, {"return_number": rn, "withheld": withheld}))["density"]
+    assert d["per_m2_occupied_cells"] == 4.0  # every point
+    assert d["measured"] == {"points": 196, "occupied_cells": 49, "per_m2_occupied_cells": 4.0}
+    # nothing to leave out, or return numbers all 0 (not recorded): no second figure
+    assert info(PointCloud(xyz, {"return_number": np.ones(400, np.uint8)}))["density"]["measured"] is None
+    assert info(PointCloud(xyz, {"return_number": np.zeros(400, np.uint8)}))["density"]["measured"] is None
+    # the same points as the classifier's usable points
+    from lidarfx.classify import usable_mask
+
+    cloud = PointCloud(xyz, {"return_number": rn, "withheld": withheld})
+    assert d["measured"]["points"] == usable_mask(cloud).sum()
+
+
 def test_info_streams_las_in_chunks(monkeypatch):
+    from lidarfx.classify import usable_mask
+
     path = real("pont.laz")
     whole = info(path)
     monkeypatch.setattr(las_io, "CHUNK_POINTS", 9_999)
     assert info(path) == whole
+    # IGN virtual points (class 66, return number 0) fill half the area: 26 pts/m² over all, 52 measured
+    assert whole["density"]["measured"]["points"] == usable_mask(read(path)).sum() == 225_576
+    assert whole["density"]["measured"]["per_m2_occupied_cells"] == pytest.approx(52.18, abs=0.01)
 
 
 # --------------------------------------------------------------------- PLY

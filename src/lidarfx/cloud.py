@@ -11,7 +11,25 @@ import numpy as np
 
 from .errors import LidarfxError
 
-__all__ = ["PointCloud"]
+__all__ = ["PointCloud", "measurement_flags"]
+
+
+def measurement_flags(xyz: np.ndarray, attrs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(ok, returned)`` per point: ``ok`` = finite coordinates, not withheld, not synthetic;
+    ``returned`` = ``return_number > 0`` (None without return numbers).
+
+    A point is a real measurement when it is ``ok`` and, if any point of the cloud has a
+    return number above 0, ``returned``: IGN LiDAR HD *virtual* points (class 66) have
+    return number 0.  One definition for the classifier's usable points and ``info``'s
+    measured density; a caller that sees a cloud in chunks applies the "any point" part
+    over the whole cloud.
+    """
+    ok = np.all(np.isfinite(xyz), axis=1)
+    for flag in ("withheld", "synthetic"):
+        if flag in attrs:
+            ok &= np.asarray(attrs[flag]) == 0
+    returned = np.asarray(attrs["return_number"]) > 0 if "return_number" in attrs else None
+    return ok, returned
 
 
 class PointCloud:

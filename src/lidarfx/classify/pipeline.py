@@ -27,7 +27,7 @@ import numba as nb
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
-from ..cloud import PointCloud
+from ..cloud import PointCloud, measurement_flags
 from ..errors import LidarfxError, LidarfxWarning
 from ..features.api import check_options, radii_list, scale_suffix
 
@@ -157,14 +157,9 @@ def usable_mask(cloud: PointCloud) -> np.ndarray:
     excluded from neighbourhoods and from prediction without looking at the
     (reference) classification.
     """
-    ok = np.all(np.isfinite(cloud.xyz), axis=1)
-    for flag in ("withheld", "synthetic"):
-        if flag in cloud:
-            ok &= np.asarray(cloud[flag]) == 0
-    if "return_number" in cloud:
-        rn = np.asarray(cloud["return_number"])
-        if (rn > 0).any():
-            ok &= rn > 0
+    ok, returned = measurement_flags(cloud.xyz, cloud.attrs)
+    if returned is not None and returned.any():
+        ok &= returned
     return ok
 
 

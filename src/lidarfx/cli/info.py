@@ -11,7 +11,10 @@ EPILOG = """examples:
   lidarfx info als.skops                 # a classifier model file (as: lidarfx classify info)
 
 density: points per m² = n / number of occupied 1 m x 1 m cells (plan view), and
-n / xy bounding-box area; feet-based CRSs are converted to metres.
+n / xy bounding-box area; feet-based CRSs are converted to metres.  When a file holds
+virtual (return number 0, e.g. IGN class 66), withheld or synthetic points, the density
+of the measured points alone is shown too: the points the classifier and its density
+check use.
 """
 
 
@@ -80,11 +83,13 @@ def _table(res: dict[str, Any]):
     if d:
         bbox = f"{d['per_m2_bbox']:,.2f}" if d["per_m2_bbox"] is not None else "n/a"
         note = " (units assumed metres)" if d["unit_assumed"] else ""
-        table.add_row(
-            "density",
-            f"{d['per_m2_occupied_cells']:,.2f} pts/m² over {d['occupied_cells']:,} occupied 1 m cells; "
-            f"{bbox} pts/m² over the bounding box{note}",
-        )
+        text = (f"{d['per_m2_occupied_cells']:,.2f} pts/m² over {d['occupied_cells']:,} occupied 1 m cells; "
+                f"{bbox} pts/m² over the bounding box{note}")
+        m = d.get("measured")
+        if m:
+            text += (f"\nmeasured points only ({m['points']:,}; no virtual / withheld / synthetic points): "
+                     f"{m['per_m2_occupied_cells']:,.2f} pts/m² over {m['occupied_cells']:,} cells")
+        table.add_row("density", text)
     elif res["bounds"] and (res.get("crs") or {}).get("geographic"):
         table.add_row("density", "n/a (geographic coordinates)")
     crs = res.get("crs")

@@ -28,7 +28,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .._atomic import atomic_path, check_not_same_file, check_output_folder
-from ..cloud import PointCloud
+from ..cloud import PointCloud, measurement_flags
 from ..errors import LidarfxError
 from ..progress import bar as _bar
 from ..progress import wanted as _wanted
@@ -268,6 +268,10 @@ class _Summary:
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
         self.cells: list[np.ndarray] = []
+        # measured points (cloud.measurement_flags), split by return number > 0 / = 0 because
+        # whether the zeros count is decided over the whole file
+        self.measured = {True: [0, []], False: [0, []]}
+        self.any_returned = False
         self.counts: dict[str, dict[int, int]] = {}
         self.dtypes: dict[str, str] = {}
 
@@ -279,9 +283,18 @@ class _Summary:
         self.n += len(xyz)
         self.lo = np.minimum(self.lo, xyz.min(axis=0))
         self.hi = np.maximum(self.hi, xyz.max(axis=0))
-        ix = np.floor(xyz[:, 0] / self.cell).astype(np.int64)
-        iy = np.floor(xyz[:, 1] / self.cell).astype(np.int64)
-        self.cells.append(np.unique((ix << 32) + (iy & 0xFFFFFFFF)))
+        with np.errstate(invalid="ignore"):
+            ix = np.floor(xyz[:, 0] / self.cell).astype(np.int64)
+            iy = np.floor(xyz[:, 1] / self.cell).astype(np.int64)
+        key = (ix << 32) + (iy & 0xFFFFFFFF)
+        self.cells.append(np.unique(key))
+        ok, returned = measurement_flags(xyz, attrs)
+        self.any_returned |= returned is not None and bool(returned.any())
+        parts = {True: ok} if returned is None else {True: ok & returned, False: ok & ~returned}
+        for positive, m in parts.items():
+            acc = self.measured[positive]
+            acc[0] += int(m.sum())
+            acc[1].append(np.unique(key[m]))
         for name in ("classification", "return_number", "number_of_returns"):
             if name in attrs:
                 values, counts = np.unique(attrs[name], return_counts=True)
@@ -302,6 +315,7 @@ class _Summary:
                 "per_m2_bbox": self.n / (dx * dy) if dx * dy > 0 else None,
                 "occupied_cells": occupied,
                 "cell_size_m": DENSITY_CELL_M,
+                "measured": self._measured(),
             }
         classes = self.counts.get("classification")
         out["classes"] = (
@@ -320,6 +334,18 @@ class _Summary:
         out["returns"] = returns or None
         out["attributes"] = dict(self.dtypes)
         return out
+
+
+    def _measured(self) -> dict[str, Any] | None:
+        """Density of the real measurements (no virtual / withheld / synthetic points), or None
+        when that is every point."""
+        pos, zero = self.measured[True], self.measured[False]
+        n, parts = (pos[0], pos[1]) if self.any_returned else (pos[0] + zero[0], pos[1] + zero[1])
+        if n == self.n:
+            return None
+        occupied = int(np.unique(np.concatenate(parts)).size) if n else 0
+        return {"points": n, "occupied_cells": occupied,
+                "per_m2_occupied_cells": n / (occupied * DENSITY_CELL_M**2) if occupied else 0.0}
 
 
 def info(source: str | os.PathLike | PointCloud) -> dict[str, Any]:
