@@ -526,6 +526,13 @@ def test_cli_ground_eval_json(scene_file, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "type I" in text and "mean" in text
+    # no point of the reference class: type I is undefined, written as null (strict JSON, no NaN)
+    assert main(["ground-eval", str(path), "--reference-class", "99", "--json", "-q"]) == 0
+    out = capsys.readouterr().out
+    assert "NaN" not in out
+    res = json.loads(out)
+    assert res["files"][0]["type_i"] is None and res["mean"]["type_i"] is None
+    assert res["files"][0]["type_ii"] > 0  # every point the filter calls ground is then an error
 
 
 def test_cli_dtm(scene_file, tmp_path, capsys):
@@ -548,6 +555,8 @@ def test_cli_errors_exit_2(scene_file, tmp_path, capsys):
     unlabelled = tmp_path / "u.xyz"
     np.savetxt(unlabelled, np.random.default_rng(0).random((20, 3)))
     assert main(["ground-eval", str(unlabelled)]) == 2
+    assert main(["ground-eval", str(path), "--ignore-classes", "1,2,6,7"]) == 2  # nothing left to score
+    assert "no points to evaluate" in capsys.readouterr().err
     assert main(["dtm", str(unlabelled), str(tmp_path / "d.tif")]) == 2  # no classification
     with pytest.raises(SystemExit) as exc:
         main(["ground", str(path), str(tmp_path / "o.laz"), "--ignore-classes", "a,b"])

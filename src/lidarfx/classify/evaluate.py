@@ -15,7 +15,6 @@ Undefined ratios (0 / 0) are NaN (``null`` in JSON).
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import math
 import os
 import time
@@ -770,28 +769,11 @@ def format_report(report: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
-def _json_default(o: Any) -> Any:
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
-
-
-def _nan_to_none(o: Any) -> Any:
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, dict):
-        return {k: _nan_to_none(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_nan_to_none(v) for v in o]
-    return o
-
-
 def report_json(report: dict[str, Any]) -> str:
-    return json.dumps(_nan_to_none(report), indent=2, default=_json_default, allow_nan=False)
+    """The report as strict JSON (NaN → null)."""
+    from .._json import dumps
+
+    return dumps(report, indent=2)
 
 
 def write_report(report: dict[str, Any], out_dir: str | os.PathLike) -> list[Path]:

@@ -21,6 +21,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from .. import __version__
+from .._json import jsonable
 from ..cloud import PointCloud
 from ..errors import LidarfxError, LidarfxWarning
 from .classes import DEFAULT_IGNORE, ClassMap
@@ -569,7 +570,7 @@ class ClassifierModel:
             "format_version": FORMAT_VERSION,
             "lidarfx_version": __version__,
             "sklearn_version": _sklearn_version(),
-            "meta": _plain(self.meta),
+            "meta": jsonable(self.meta),
             "impute": tail.named_steps["impute"],
             "classifier": tail.named_steps["classifier"],
         }
@@ -587,23 +588,6 @@ def _sklearn_version() -> str:
     import sklearn
 
     return sklearn.__version__
-
-
-def _plain(obj: Any) -> Any:
-    """JSON-like copy (dict/list/str/int/float/bool/None) for the model file."""
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (np.floating,)):
-        return float(obj)
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if obj is None or isinstance(obj, (str, int, float, bool)):
-        return obj
-    return str(obj)
 
 
 def file_types(path: str | os.PathLike) -> set[str]:

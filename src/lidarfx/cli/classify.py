@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
+from .. import _json
 from ._args import check_output, check_picture_path, xyz
 
 EPILOG = """examples:
@@ -271,7 +271,7 @@ def run_train(args) -> int:
                "min_building_area": model.min_building_area,
                "training": model.meta["training"], "seconds": round(time.perf_counter() - t0, 3)}
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     say(f"model -> {args.model} ({model.classes.spec()}; {len(model.feature_names)} features; "
         f"{summary['seconds']:.1f} s)")
@@ -323,7 +323,7 @@ def run_predict(args) -> int:
                "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     sb = summary["small_buildings"]
     if sb:
@@ -339,7 +339,7 @@ def run_info(args) -> int:
 
     summary = {"model": str(args.model), **load_model(args.model).summary()}
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
         return 0
     from rich.console import Console

@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
+
+from .. import _json
 
 EPILOG = """example:
   lidarfx demo                 # writes ./lidarfx-demo/
@@ -98,7 +99,7 @@ def run(args) -> int:
         },
     }
     with open(out / "summary.json", "w") as fh:
-        json.dump(summary, fh, indent=2)
+        _json.dump(summary, fh, indent=2)
     console.print(
         f"features {t2 - t1:.2f} s, write {t3 - t2:.2f} s -> {out}/ "
         "(facade.laz, facade_features.laz, facade_features.png, summary.json)"

@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
+from .. import _json
 from ._args import read_input, xyz
 
 EPILOG = """examples:
@@ -111,7 +111,7 @@ def run(args) -> int:
         "seconds": {"read": round(t1 - t0, 3), "index": round(t2 - t1, 3), "features_and_write": round(t3 - t2, 3)},
     }
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
         print(

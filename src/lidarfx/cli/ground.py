@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
+from .. import _json
 from ._args import check_output
 
 GROUND_EPILOG = """examples:
@@ -195,7 +195,7 @@ def run_ground(args) -> int:
         },
     }
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
         print(
@@ -221,6 +221,9 @@ def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict,
         raise LidarfxError(f"{path}: no classification to use as reference")
     cls = np.asarray(cloud["classification"])
     keep = ~np.isin(cls, list(ignore_classes or []))
+    if not keep.any():
+        raise LidarfxError(f"{path}: no points to evaluate"
+                           + (f" (classes {sorted(set(ignore_classes))} ignored)" if len(cloud) else ""))
     attrs = {k: cloud[k][keep] for k in ("return_number", "number_of_returns") if k in cloud}
     bare = PointCloud(cloud.xyz[keep], attrs)  # xyz and returns only: no classes
     t0 = time.perf_counter()
@@ -239,7 +242,7 @@ def run_eval(args) -> int:
     rows = [evaluate_file(f, args.reference_class, args.ignore_classes, params, progress) for f in args.inputs]
     mean = {k: float(np.mean([r[k] for r in rows])) for k in ("type_i", "type_ii", "total")}
     if args.json:
-        json.dump(
+        _json.dump(
             {"reference_class": args.reference_class, "parameters": {**params, "ignore_classes": args.ignore_classes},
              "files": rows, "mean": mean},
             sys.stdout,
@@ -286,7 +289,7 @@ def run_dtm(args) -> int:
         "seconds": round(sec, 3),
     }
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
         print(f"DTM {raster.shape[1]}x{raster.shape[0]} cells of {raster.resolution} -> {args.output}", file=sys.stderr)

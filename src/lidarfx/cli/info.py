@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
+
+from .. import _json
 
 EPILOG = """examples:
   lidarfx info scan.laz                  # a table per file
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         return run_info(argparse.Namespace(model=args.files[0], json=args.json))
     results = [info(f) for f in args.files]
     if args.json:
-        print(json.dumps(results[0] if len(results) == 1 else results, indent=2))
+        print(_json.dumps(results[0] if len(results) == 1 else results, indent=2))
         return 0
     from rich.console import Console
 

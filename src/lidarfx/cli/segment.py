@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
+from .. import _json
 from ._args import check_picture_path, read_input, xyz
 
 EPILOG = """examples:
@@ -136,7 +136,7 @@ def run(args) -> int:
         "seconds": {"read": round(t1 - t0, 3), "segment": round(t2 - t1, 3), "table": round(t3 - t2, 3), "write": round(t4 - t3, 3)},
     }
     if args.json:
-        json.dump(summary, sys.stdout, indent=2, allow_nan=False, default=str)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
         _print_summary(summary)

@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
+from .. import _json
 from ._args import read_input
 
 EPILOG = """examples:
@@ -67,7 +67,7 @@ def run(args) -> int:
         "seconds": {"read": round(t1 - t0, 3), "select_write": round(t2 - t1, 3)},
     }
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        _json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
         share = f" ({100 * kept / total:.1f} %)" if total else ""

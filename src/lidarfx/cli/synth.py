@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from .. import _json
 from ..errors import LidarfxError
 from ._args import numbers
 
@@ -101,6 +102,6 @@ def run(args: argparse.Namespace) -> int:
     from .._atomic import atomic_path
 
     with atomic_path(truth_path, suffix=".json") as tmp:
-        tmp.write_text(json.dumps(cloud.meta["truth"], indent=1) + "\n", encoding="utf-8")
+        tmp.write_text(_json.dumps(cloud.meta["truth"], indent=1) + "\n", encoding="utf-8")
     print(f"{args.kind}: {len(cloud):,} points -> {out} (truth: {truth_path})")
     return 0

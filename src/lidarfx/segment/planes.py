@@ -34,7 +34,6 @@ normal computation and the growing.
 from __future__ import annotations
 
 import csv
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -43,6 +42,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .. import _json
 from .._atomic import atomic_path
 from ..cloud import PointCloud
 from ..errors import LidarfxError
@@ -420,17 +420,12 @@ def write_segments_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> Path
 
 def write_segments_json(rows: Sequence[dict[str, Any]], path: str | Path, meta: dict[str, Any] | None = None) -> Path:
     """Write ``{"columns": ..., "segmentation": meta, "segments": [rows]}`` as JSON (NaN as null), atomically."""
-    def clean(v):
-        if isinstance(v, float) and not math.isfinite(v):
-            return None
-        return v
-
     doc = {
         "columns": TABLE_COLUMNS,
         "segmentation": meta or {},
-        "segments": [{c: clean(r[c]) for c in TABLE_COLUMNS} for r in rows],
+        "segments": [{c: r[c] for c in TABLE_COLUMNS} for r in rows],
     }
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(doc, fh, indent=1)
+        _json.dump(doc, fh, indent=1)
         fh.write("\n")
     return Path(path)

@@ -21,6 +21,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .._json import jsonable
 from ..cloud import PointCloud
 from ..errors import LidarfxError
 from ..geometry import EX, EY, EZ, dip_from_normal, normal_from_dip, perpendicular_frame, plane_basis, unit  # noqa: F401
@@ -382,26 +383,6 @@ class Scene:
                 cols.append(np.broadcast_to(np.asarray(v, dtype=dtype), (len(p),)))
             attrs[name] = np.concatenate(cols).astype(dtype) if cols else np.empty(0, dtype)
         return xyz, attrs
-
-
-def jsonable(obj: Any) -> Any:
-    """Convert numpy scalars / arrays, tuples and nested containers to plain JSON types."""
-    if isinstance(obj, Mapping):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, (np.bool_, bool)):
-        return bool(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    if obj is None or isinstance(obj, (int, str)):
-        return obj
-    return str(obj)
 
 
 def finish(name: str, xyz: np.ndarray, attrs: Mapping[str, np.ndarray], truth: Mapping[str, Any],
