@@ -472,7 +472,7 @@ def test_edited_feature_list_is_refused(tmp_path, rf_model):
         load_model(edited)
 
 
-def test_model_refuses_cloud_missing_a_feature(tmp_path):
+def test_model_refuses_cloud_missing_a_feature(tmp_path, capsys):
     rng = np.random.default_rng(0)
     n = 3000
     xyz = np.column_stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), rng.uniform(0, 1, n)])
@@ -492,6 +492,11 @@ def test_model_refuses_cloud_missing_a_feature(tmp_path):
     assert main(["classify", "predict", str(empty), str(tmp_path / "o.laz"), "--model", str(tmp_path / "m.skops"),
                  "-q"]) == 2
     assert not (tmp_path / "o.laz").exists()
+    capsys.readouterr()
+    assert main(["classify", "train", str(empty), "--model", str(tmp_path / "e.skops"), "-q"]) == 2
+    assert main(["classify", "evaluate", str(empty), "--model", str(tmp_path / "m.skops"), "-q"]) == 2
+    assert capsys.readouterr().err.count("empty.laz: no usable points") == 2
+    assert not (tmp_path / "e.skops").exists()
     # precomputed features at the wrong radius
     model.features.precomputed = True
     wrong = lidarfx.compute_features(cloud, "planarity", radii=[0.5, 2.0])
@@ -969,7 +974,7 @@ def ign_result():
 def test_ign_default_pipeline_regression(ign_result):
     """Train on the three IGN tiles, test on crop_1 + pont (classes 2 / 3+4+5 / 6, others ignored).
 
-    Measured (docs/classification.md §7, run 8): OA 0.955, mean F1 0.944, ≈ 30 s; the usual
+    Measured (docs/classification.md §7, run 9): OA 0.955, mean F1 0.944, ≈ 30 s; the usual
     pipeline (jakteristics 1/2/3 m + z + balanced RF) gets OA 0.43 on this split.
     """
     sec, seconds = ign_result

@@ -101,11 +101,40 @@ def test_drop_small_objects_relabels_small_inner_clusters_only():
     assert (out[part == 3] == 2).all()  # the blob at the edge: size unknown, kept
     assert (out[part == 0] == 0).all()
     assert st == {"components": 3, "kept_at_edge": 1, "relabelled_components": 1,
-                  "relabelled_points": int((part == 2).sum())}
+                  "relabelled_points": int((part == 2).sum()), "see_through_components": 0,
+                  "see_through_points": 0}
     assert (drop_small_objects(lab, alt, xyz, 2, 0.0) == lab).all()
     assert (drop_small_objects(lab, alt, xyz, 2, 200.0)[part == 1] == 1).all()  # a larger threshold takes the roof
     with pytest.raises(LidarfxError):
         drop_small_objects(lab, alt, xyz, 2, -1.0)
+
+
+def test_see_through_test_takes_large_clusters_the_laser_passes():
+    """A judged cluster (footprint >= the minimum area) with more than the given share of its
+    points from multi-return pulses takes its next class; a small one at the edge is not judged."""
+    xyz, lab, part = _scene()
+    alt = np.ones(len(lab), np.int64)
+    nr = np.ones(len(lab), np.int64)
+    roof = np.flatnonzero(part == 1)
+    nr[roof[: len(roof) // 2]] = 2  # exactly half of the roof from multi-return pulses: not more than 0.5
+    nr[part == 3] = 3  # the edge blob: all multi-return, but too small to be judged
+    st: dict = {}
+    out = drop_small_objects(lab, alt, xyz, 2, 10.0, returns=nr, max_multi_return_share=0.5, stats=st)
+    assert (out[part == 1] == 2).all() and (out[part == 3] == 2).all() and (out[part == 2] == 1).all()
+    assert st["see_through_components"] == 0
+    nr[roof[len(roof) // 2]] = 2  # one point more: the roof is a see-through cluster now
+    out = drop_small_objects(lab, alt, xyz, 2, 10.0, returns=nr, max_multi_return_share=0.5, stats=st)
+    assert (out[part == 1] == 1).all() and (out[part == 3] == 2).all()
+    assert st["see_through_components"] == 1 and st["see_through_points"] == len(roof)
+    assert st["relabelled_components"] == 1 and st["relabelled_points"] == (part == 2).sum()  # the small rule
+    # no return numbers, a share of 1, or the rule switched off: no test
+    for kw in ({"returns": None}, {"max_multi_return_share": 1.0}):
+        args = {"returns": nr, "max_multi_return_share": 0.5, **kw}
+        assert (drop_small_objects(lab, alt, xyz, 2, 10.0, **args)[part == 1] == 2).all()
+    assert (drop_small_objects(lab, alt, xyz, 2, 0.0, returns=nr, max_multi_return_share=0.5) == lab).all()
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(LidarfxError, match="multi-return share"):
+            drop_small_objects(lab, alt, xyz, 2, 10.0, returns=nr, max_multi_return_share=bad)
 
 
 def test_link_grows_only_for_sparse_clouds():
@@ -120,6 +149,10 @@ def test_the_rule_is_part_of_the_als_default_only():
     assert TrainConfig(min_building_area=0).min_building_area == 0.0
     with pytest.raises(LidarfxError):
         TrainConfig(min_building_area=float("nan"))
+    assert TrainConfig().max_multi_return_share == 0.5
+    assert TrainConfig(max_multi_return_share=1).max_multi_return_share == 1.0
+    with pytest.raises(LidarfxError, match="multi-return share"):
+        TrainConfig(max_multi_return_share=0)
 
 
 def test_building_class_is_the_class_holding_code_6():
@@ -188,6 +221,23 @@ def test_model_stores_and_applies_the_rule(town_model, tmp_path):
     old = load_model(path)
     del old.meta["config"]["min_building_area"]  # a model written before the rule existed
     assert old.min_building_area == 0.0
+    # the see-through test: every point from a two-return pulse makes every judged cluster (the
+    # 144 m² houses) see-through; the model's share (default 0.5) applies, 1 switches it off
+    assert town_model.max_multi_return_share == 0.5
+    cloud["number_of_returns"] = np.full(len(cloud), 2, np.uint8)
+    st = {}
+    through = town_model.predict(cloud, stats=st)
+    assert st["see_through_components"] >= 3 and not (through == 6).any()
+    assert (town_model.predict(cloud, max_multi_return_share=1.0) == rule).all()
+    town_model.set_max_multi_return_share(1.0)
+    try:
+        assert (load_model(town_model.save(tmp_path / "m1.skops")).predict(cloud) == rule).all()
+    finally:
+        town_model.set_max_multi_return_share(0.5)
+    del old.meta["config"]["max_multi_return_share"]  # a model written before the test existed
+    assert old.max_multi_return_share == 1.0
+    with pytest.raises(LidarfxError):
+        town_model.set_max_multi_return_share(0)
 
 
 def test_cross_validation_applies_the_rule_per_held_out_part(town_model):
@@ -248,6 +298,12 @@ def test_cli_min_building_area(tmp_path, capsys, town_model):
     assert s0["classes"].get(6, s0["classes"].get("6")) >= s["classes"].get(6, s["classes"].get("6"))
     assert main(["classify", "predict", str(src), str(out), "-m", str(m), "-q", "--min-building-area", "-3"]) == 2
     assert "minimum building area" in capsys.readouterr().err
+    assert s["max_multi_return_share"] == 0.5 and s["small_buildings"]["see_through_components"] == 0  # no returns
+    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--json", "-q",
+                 "--max-multi-return-share", "1"]) == 0
+    assert json.loads(capsys.readouterr().out)["max_multi_return_share"] == 1.0
+    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "-q", "--max-multi-return-share", "2"]) == 2
+    assert "multi-return share" in capsys.readouterr().err
 
 
 def test_evaluate_reports_the_rule():
@@ -258,9 +314,23 @@ def test_evaluate_reports_the_rule():
                    terrain_augment=0, classifier="rf", n_estimators=10, min_building_area=10)
     sb = rep["sections"]["leave_one_file_out"]["small_buildings"]
     assert sb["min_building_area"] == 10.0 and sb["components"] >= 6  # three houses per file at least
+    assert sb["max_multi_return_share"] == 0.5 and sb["see_through_components"] == 0  # no return numbers
     assert f"{sb['relabelled_components']:,} of {sb['components']:,} predicted-building clusters" in format_report(rep)
     rep0 = evaluate([_town(6), _town(7)], classes="ground=2,vegetation=5,building=6", cv=None, leave_one_out=True,
                     buffer=0, features="eigen,plane,height_above_ground", radii=[1.0, 2.0], max_per_class=2000,
                     terrain_augment=0, classifier="rf", n_estimators=10)  # own features: no rule by default
     assert "small_buildings" not in rep0["sections"]["leave_one_file_out"]
     assert "small-building rule" not in format_report(rep0)
+    # cross-validation passes the held-out points' return numbers to the see-through test
+    towns = [_town(6), _town(7)]
+    for t in towns:
+        t["return_number"] = np.full(len(t), 2, np.uint8)  # last returns of two-return pulses
+        t["number_of_returns"] = np.full(len(t), 2, np.uint8)
+    rep2 = evaluate(towns, classes="ground=2,vegetation=5,building=6", cv=None, leave_one_out=True,
+                    buffer=0, features="eigen,plane,height_above_ground", radii=[1.0, 2.0], max_per_class=2000,
+                    terrain_augment=0, classifier="rf", n_estimators=10, min_building_area=10)
+    sb2 = rep2["sections"]["leave_one_file_out"]["small_buildings"]
+    assert sb2["see_through_components"] >= 6  # every house: all its points from two-return pulses
+    assert rep2["sections"]["leave_one_file_out"]["metrics"]["classes"][2]["ua"] is None or \
+        rep2["sections"]["leave_one_file_out"]["metrics"]["classes"][2]["pa"] < 0.05
+    assert "see-through test (> 0.5 of the points from multi-return pulses)" in format_report(rep2)

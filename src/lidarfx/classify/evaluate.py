@@ -327,20 +327,25 @@ class HeldOutRule:
 
         idxs, y, _, g = labelled
         self.target, self.area = target, float(config.min_building_area)
+        self.share = float(config.max_multi_return_share)
         tr = config.transformer(progress=progress)
-        xyz_l, xyz_c, Xc, g_c = [], [], [], []
+        xyz_l, xyz_c, Xc, g_c, nr_l, nr_c = [], [], [], [], [], []
         self.link = []
         for i, (s, idx) in enumerate(zip(sources, idxs)):
             u = unit_to_metre(s.cloud)
             ctx = np.flatnonzero(_labels(s, cmap) < 0)
             xyz_l.append(s.cloud.xyz[idx] * u)
             xyz_c.append(s.cloud.xyz[ctx] * u)
+            nr = np.asarray(s.cloud["number_of_returns"]) if "number_of_returns" in s.cloud else np.zeros(len(s.cloud))
+            nr_l.append(nr[idx])
+            nr_c.append(nr[ctx])
             Xc.append(tr.transform(CloudSample(s.cloud, ctx)) if len(ctx) else
                       np.empty((0, len(config.feature_names())), np.float32))
             g_c.append(np.full(len(ctx), i, np.int64))
             self.link.append(link_for(cloud_density(s.cloud)))
-        self.X, self.xyz, self.g = X, np.vstack(xyz_l), g
+        self.X, self.xyz, self.g, self.nr = X, np.vstack(xyz_l), g, np.concatenate(nr_l)
         self.xyz_c, self.X_c, self.g_c = np.vstack(xyz_c), np.vstack(Xc), np.concatenate(g_c)
+        self.nr_c = np.concatenate(nr_c)
         self.folds_c = np.full(len(self.g_c), -1, np.int64)
         self.stats: dict[str, int] = {}
 
@@ -383,7 +388,9 @@ class HeldOutRule:
             R[:, self.target] = -1.0
             st: dict[str, int] = {}
             new = drop_small_objects(k, R.argmax(axis=1), np.vstack([self.xyz[te[a]], self.xyz_c[c]]),
-                                     self.target, self.area, link=self.link[i], stats=st)
+                                     self.target, self.area, link=self.link[i],
+                                     returns=np.concatenate([self.nr[te[a]], self.nr_c[c]]),
+                                     max_multi_return_share=self.share, stats=st)
             out[a] = new[: len(a)]
             for key, v in st.items():
                 self.stats[key] = self.stats.get(key, 0) + v
@@ -442,7 +449,8 @@ def _out_dir(out_dir: str | os.PathLike, create: bool = True) -> Path:
 def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | None = False,
                    log: Callable[[str], None] | None = None,
                    maps_dir: str | os.PathLike | None = None,
-                   min_building_area: float | None = None) -> dict[str, Any]:
+                   min_building_area: float | None = None,
+                   max_multi_return_share: float | None = None) -> dict[str, Any]:
     """Metrics of a trained model on labelled clouds: per file and pooled.
 
     Every usable point is classified (features use all of them as neighbours);
@@ -450,7 +458,8 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     With ``maps_dir``, a plan-view error map ``errors_<file>.png`` of every file
     is written there (:func:`lidarfx.render.error_map`; its path in the file's
     ``error_map``, the points of its error pairs in ``error_pairs``).
-    ``min_building_area``: overrides the model's object-size rule (:meth:`ClassifierModel.predict`).
+    ``min_building_area``, ``max_multi_return_share``: override the model's building-cluster
+    rule (:meth:`ClassifierModel.predict`).
     """
     maps = _out_dir(maps_dir, create=False) if maps_dir is not None else None  # refused before any work
     srcs = read_sources(sources, progress=progress)
@@ -473,7 +482,8 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         dens = model.density_check(s.cloud, s.name)
         rule: dict[str, Any] = {}
         codes = model.predict(s.cloud, progress=progress, check_density=False,
-                              min_building_area=min_building_area, stats=rule)
+                              min_building_area=min_building_area, max_multi_return_share=max_multi_return_share,
+                              stats=rule)
         pred = cmap.index_of(np.clip(codes, 0, 255))
         cm = confusion_matrix(y, np.where(y >= 0, pred, 0), k)
         total += cm
@@ -483,8 +493,11 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         m["unusable_points"] = int(s.n_total - len(s.cloud))
         m["density"] = dens
         if rule:
-            m["small_buildings"] = {"min_building_area": model.min_building_area if min_building_area is None
-                                    else float(min_building_area), **rule}
+            m["small_buildings"] = {
+                "min_building_area": model.min_building_area if min_building_area is None else float(min_building_area),
+                "max_multi_return_share": (model.max_multi_return_share if max_multi_return_share is None
+                                           else float(max_multi_return_share)),
+                **rule}
         if maps is not None:
             from ..render import error_map
 
@@ -635,6 +648,7 @@ def evaluate(
                                        "seconds": round(time.perf_counter() - t0, 3)}
             if rule is not None:
                 report["sections"][key]["small_buildings"] = {"min_building_area": cfg.min_building_area,
+                                                              "max_multi_return_share": cfg.max_multi_return_share,
                                                               **rule.stats}
             if key == "cv_blocks":
                 fitted_blocks = fitted
@@ -705,10 +719,16 @@ def format_metrics(m: dict[str, Any], title: str | None = None) -> str:
 
 
 def _small_buildings_line(sb: dict[str, Any]) -> str:
-    return (f"small-building rule ({sb['min_building_area']:g} m², docs/classification.md §2): "
+    text = (f"small-building rule ({sb['min_building_area']:g} m², docs/classification.md §2): "
             f"{sb.get('relabelled_components', 0):,} of {sb.get('components', 0):,} predicted-building clusters "
             f"relabelled ({sb.get('relabelled_points', 0):,} points), {sb.get('kept_at_edge', 0):,} small ones "
             "kept at the data's edge")
+    share = sb.get("max_multi_return_share", 1.0)
+    if share < 1:
+        text += (f"; see-through test (> {share:g} of the points from multi-return pulses): "
+                 f"{sb.get('see_through_components', 0):,} clusters relabelled "
+                 f"({sb.get('see_through_points', 0):,} points)")
+    return text
 
 
 def format_report(report: dict[str, Any]) -> str:

@@ -80,6 +80,11 @@ DEFAULT_MAX_PER_CLASS = 20_000
 #: Part of the ALS default: with a feature list of one's own (e.g. TLS) the rule is off unless asked for
 DEFAULT_MIN_BUILDING_AREA = 10.0
 
+#: a predicted-building cluster of at least that area in which more than this share of the points
+#: come from multi-return pulses is given its next class (see-through test; docs/classification.md
+#: §6.16); 1 = no test.  Acts only together with the minimum area above
+DEFAULT_MAX_MULTI_RETURN_SHARE = 0.5
+
 #: prediction computes and classifies the features of this many points at a time: the feature
 #: matrix of a whole 40-million-point tile (81 float32 columns) would need 13 GB; a chunk needs 0.3 GB
 PREDICT_CHUNK = 1_000_000
@@ -120,6 +125,7 @@ class TrainConfig:
     seed: int = 0
     n_jobs: int | None = None
     min_building_area: float | None = None
+    max_multi_return_share: float = DEFAULT_MAX_MULTI_RETURN_SHARE
 
     def __post_init__(self) -> None:
         if isinstance(self.features, str):
@@ -152,6 +158,9 @@ class TrainConfig:
         self.min_building_area = float(self.min_building_area)
         if not (self.min_building_area >= 0 and math.isfinite(self.min_building_area)):
             raise LidarfxError(f"min_building_area must be a number of m² >= 0, got {self.min_building_area}")
+        from .objects import check_share
+
+        self.max_multi_return_share = check_share(self.max_multi_return_share)
         if self.max_per_class is not None and int(self.max_per_class) < 1:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
         make_classifier(self.classifier)  # validates the kind
@@ -276,6 +285,9 @@ def read_sources(sources: Any, progress: bool | None = False) -> list[Source]:
         out.append(Source(name, sub, mask, len(cloud)))
     if not out:
         raise LidarfxError("no input clouds")
+    if not any(len(s.cloud) for s in out):
+        names = ", ".join(s.name for s in out)
+        raise LidarfxError(f"{names}: no usable points (empty, or only virtual / withheld / synthetic points)")
     return out
 
 
@@ -378,6 +390,7 @@ class ClassifierModel:
             "features": self.feature_names,
             "radii": self.radii,
             "min_building_area": self.min_building_area,
+            "max_multi_return_share": self.max_multi_return_share,
             "config": self.meta["config"],
             "training_files": tr.get("files", []),
             "training_density": self.training_density,
@@ -478,9 +491,23 @@ class ClassifierModel:
             raise LidarfxError(f"the minimum building area must be a number of m² >= 0, got {area}")
         self.meta = {**self.meta, "config": {**self.meta["config"], "min_building_area": area}}
 
+    @property
+    def max_multi_return_share(self) -> float:
+        """Largest share of points from multi-return pulses that a predicted building cluster of at
+        least :attr:`min_building_area` may have (the see-through test of :mod:`.objects`; 1 = no
+        test; models written before the test existed have 1)."""
+        return float(self.meta["config"].get("max_multi_return_share") or 1.0)
+
+    def set_max_multi_return_share(self, share: float) -> None:
+        """Change the see-through test of this model (a share in (0, 1]; 1 = off); kept when saved."""
+        from .objects import check_share
+
+        share = check_share(share)
+        self.meta = {**self.meta, "config": {**self.meta["config"], "max_multi_return_share": share}}
+
     def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False,
                 check_density: bool = True, min_building_area: float | None = None,
-                stats: dict | None = None):
+                max_multi_return_share: float | None = None, stats: dict | None = None):
         """Output class code of every point (int16); −1 where not predicted (virtual /
         withheld / synthetic points).  With ``return_confidence`` also the probability of
         the class given (float32, NaN where not predicted).  ``check_density``:
@@ -488,14 +515,16 @@ class ClassifierModel:
 
         Predicted-building clusters smaller than ``min_building_area`` m² (default: the
         model's, :attr:`min_building_area`; 0 = off) that do not reach the cloud's edge
-        get their next most probable class (:func:`.objects.drop_small_objects`; its
-        counts go into ``stats``).  :meth:`predict_proba` returns the probabilities
-        before this rule."""
+        get their next most probable class, and so do the larger ones in which more than
+        ``max_multi_return_share`` (default: the model's) of the points come from pulses
+        with several returns (:func:`.objects.drop_small_objects`; its counts go into
+        ``stats``).  :meth:`predict_proba` returns the probabilities before this rule."""
         from .objects import building_class, drop_small_objects, link_for
 
         if check_density:
             self.density_check(cloud)
         area = self.min_building_area if min_building_area is None else float(min_building_area)
+        share = self.max_multi_return_share if max_multi_return_share is None else float(max_multi_return_share)
         target = building_class(self.classes) if area > 0 else None
         usable = usable_mask(cloud)
         sub = cloud if usable.all() else cloud.subset(usable)
@@ -519,7 +548,9 @@ class ClassifierModel:
         if target is not None:
             u = unit_to_metre(sub)
             xyz = sub.xyz * u if u != 1.0 else sub.xyz
-            new = drop_small_objects(k, alt, xyz, target, area, link=link_for(point_density(xyz)), stats=stats)
+            returns = np.asarray(sub["number_of_returns"]) if "number_of_returns" in sub else None
+            new = drop_small_objects(k, alt, xyz, target, area, link=link_for(point_density(xyz)), returns=returns,
+                                     max_multi_return_share=share, stats=stats)
             if alt_p is not None:
                 changed = new != k
                 best[changed] = alt_p[changed]
@@ -554,6 +585,7 @@ class ClassifierModel:
                                              "predicted_points": int((codes >= 0).sum()),
                                              "density": dens,
                                              "min_building_area": self.min_building_area,
+                                             "max_multi_return_share": self.max_multi_return_share,
                                              "small_buildings": rule or None}}
         return out
 

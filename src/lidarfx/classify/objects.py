@@ -9,6 +9,12 @@ of the classified data (within :data:`EDGE_RING` cells of :data:`EDGE_CELL` m of
 an empty cell or of the data's bounding box) is kept whatever its size: a building
 cut by a tile edge cannot be measured.  docs/classification.md §2 and §6.13.
 
+A component large enough to be judged (footprint at least the minimum area) in
+which more than :data:`MAX_MULTI_RETURN_SHARE` of the points come from pulses
+with several returns also takes its next class: a roof stops the laser, a tree
+crown lets it through (docs/classification.md §6.16).  Clouds without
+``number_of_returns`` are not tested.
+
 Clouds sparser than the default's link can bridge (mean spacing above half of
 it) get a longer link and larger edge cells: ``max(LINK, 2 / √density)``.
 """
@@ -21,8 +27,8 @@ import numpy as np
 from ..errors import LidarfxError
 from ..geometry import group_hull_areas
 
-__all__ = ["BUILDING_CODE", "LINK", "EDGE_CELL", "EDGE_RING", "building_class", "edge_mask", "link_for",
-           "drop_small_objects"]
+__all__ = ["BUILDING_CODE", "LINK", "EDGE_CELL", "EDGE_RING", "MAX_MULTI_RETURN_SHARE", "building_class", "edge_mask",
+           "link_for", "drop_small_objects"]
 
 BUILDING_CODE = 6
 """LAS code of buildings: the rule acts on the class holding it."""
@@ -32,6 +38,8 @@ EDGE_CELL = 1.0
 """Cell (m) of the occupancy grid that finds the edge of the data."""
 EDGE_RING = 2
 """Cells from an empty cell within which a point counts as at the edge."""
+MAX_MULTI_RETURN_SHARE = 0.5
+"""Largest share of points from multi-return pulses a judged building cluster may have (1 = no test)."""
 
 
 def building_class(classes) -> int | None:
@@ -74,22 +82,37 @@ def edge_mask(xy: np.ndarray, cell: float = EDGE_CELL, ring: int = EDGE_RING) ->
     return near[inv.ravel()]
 
 
+def check_share(share: float) -> float:
+    """``share`` as a float in (0, 1], or a one-line error."""
+    share = float(share)
+    if not (0 < share <= 1):
+        raise LidarfxError(f"the largest multi-return share must lie in (0, 1] (1 = no test), got {share!r}")
+    return share
+
+
 def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndarray, target: int,
                        min_area: float, *, link: float = LINK, cell: float | None = None,
-                       ring: int = EDGE_RING, stats: dict | None = None) -> np.ndarray:
-    """Apply the object-size rule: a copy of ``labels`` (class index per point) in which
-    the components of class ``target`` smaller than ``min_area`` m² (plan convex hull)
-    that do not reach the data's edge take ``alternative`` (per point: its most probable
-    other class).  ``xyz`` in metres; every point given is part of the data (its
-    footprint defines the edge).  ``stats``, when given, receives the numbers of
-    components found, kept at the edge and relabelled, and of points relabelled."""
+                       ring: int = EDGE_RING, returns: np.ndarray | None = None,
+                       max_multi_return_share: float = 1.0, stats: dict | None = None) -> np.ndarray:
+    """Apply the building-cluster rule: a copy of ``labels`` (class index per point) in
+    which the components of class ``target`` smaller than ``min_area`` m² (plan convex
+    hull) that do not reach the data's edge take ``alternative`` (per point: its most
+    probable other class).  So do the components of at least ``min_area`` m² in which
+    more than ``max_multi_return_share`` of the points have ``returns`` (their pulse's
+    number of returns, per point) above 1; without ``returns``, or with a share of 1,
+    there is no such test.  ``min_area`` 0 switches both off.  ``xyz`` in metres; every
+    point given is part of the data (its footprint defines the edge).  ``stats``, when
+    given, receives the numbers of components found, kept at the edge and relabelled
+    (small ones, see-through ones), and of points relabelled."""
     labels = np.asarray(labels)
     if not (min_area >= 0 and math.isfinite(min_area)):
         raise LidarfxError(f"the minimum building area must be a number of m² >= 0, got {min_area!r}")
+    share = check_share(max_multi_return_share)
     out = labels.copy()
     b = np.flatnonzero(labels == target)
     if stats is not None:
-        stats.update({"components": 0, "kept_at_edge": 0, "relabelled_components": 0, "relabelled_points": 0})
+        stats.update({"components": 0, "kept_at_edge": 0, "relabelled_components": 0, "relabelled_points": 0,
+                      "see_through_components": 0, "see_through_points": 0})
     if min_area == 0 or not len(b):
         return out
     from ..segment.components import linked_components  # numba: loaded on first use
@@ -100,9 +123,17 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     k = len(area)
     touches = np.bincount(comp, weights=edge_mask(xyz, cell or link, ring)[b], minlength=k) > 0
     small = (area < min_area) & ~touches
-    drop = b[small[comp]]
+    see_through = np.zeros(k, bool)
+    if returns is not None and share < 1:
+        multi = np.asarray(returns)[b] > 1
+        see_through = (area >= min_area) & (np.bincount(comp, weights=multi, minlength=k)
+                                            > share * np.bincount(comp, minlength=k))
+    drop = b[(small | see_through)[comp]]
     out[drop] = np.asarray(alternative)[drop]
     if stats is not None:
         stats.update({"components": int(k), "kept_at_edge": int((touches & (area < min_area)).sum()),
-                      "relabelled_components": int(small.sum()), "relabelled_points": int(len(drop))})
+                      "relabelled_components": int(small.sum()),
+                      "relabelled_points": int(small[comp].sum()),
+                      "see_through_components": int(see_through.sum()),
+                      "see_through_points": int(see_through[comp].sum())})
     return out

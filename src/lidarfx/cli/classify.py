@@ -107,6 +107,11 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
                         "(convex hull, m²) that do not reach the cloud's edge get their next most probable "
                         "class; 0 = off; stored in the model; default 10 with the default features (ALS), "
                         "0 with --features")
+    g.add_argument("--max-multi-return-share", type=float, default=None, metavar="S",
+                   help="with the rule above: a predicted-building cluster of at least that area in which more "
+                        "than this share of the points come from pulses with several returns (a tree crown lets "
+                        "the laser through, a roof does not) gets its next class too; 1 = off; stored in the "
+                        "model; default 0.5")
     g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier")
     g.add_argument("--jobs", type=int, default=None,
                    help="threads of the classifier fit (rf: all cores; hgb: the cores idle when the fit "
@@ -164,6 +169,8 @@ def register(sub) -> None:
                     help="also write a plan-view map of the predicted classes (class of the highest point per cell)")
     pr.add_argument("--min-building-area", type=float, default=None, metavar="M2",
                     help="object-size rule for buildings (see 'classify train --help'); 0 = off; default: the model's")
+    pr.add_argument("--max-multi-return-share", type=float, default=None, metavar="S",
+                    help="see-through test of that rule (see 'classify train --help'); 1 = off; default: the model's")
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
@@ -240,6 +247,7 @@ def _config(args):
         seed=args.seed,
         n_jobs=args.jobs,
         **({} if args.min_building_area is None else {"min_building_area": args.min_building_area}),
+        **({} if args.max_multi_return_share is None else {"max_multi_return_share": args.max_multi_return_share}),
     )
 
 
@@ -269,6 +277,7 @@ def run_train(args) -> int:
     summary = {"model": args.model, "classes": model.classes.spec(), "features": len(model.feature_names),
                "radii": model.radii, "classifier": model.meta["config"]["classifier"],
                "min_building_area": model.min_building_area,
+               "max_multi_return_share": model.max_multi_return_share,
                "training": model.meta["training"], "seconds": round(time.perf_counter() - t0, 3)}
     if args.json:
         _json.dump(summary, sys.stdout, indent=2)
@@ -297,8 +306,7 @@ def run_predict(args) -> int:
     cloud = io.read(args.input, progress=False if args.quiet else None)
     model.check(cloud, args.input)
     t1 = time.perf_counter()
-    if args.min_building_area is not None:
-        model.set_min_building_area(args.min_building_area)
+    _rule_overrides(model, args)
     out = model.classify(cloud, confidence=args.confidence, progress=False if args.quiet else None)
     t2 = time.perf_counter()
     io.write(out, args.output, progress=False if args.quiet else None)
@@ -319,6 +327,7 @@ def run_predict(args) -> int:
                "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
                "density": out.meta["classify"].get("density"), "ground": model.features.ground,
                "min_building_area": model.min_building_area,
+               "max_multi_return_share": model.max_multi_return_share,
                "small_buildings": out.meta["classify"].get("small_buildings"),
                "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
@@ -328,10 +337,20 @@ def run_predict(args) -> int:
     sb = summary["small_buildings"]
     if sb:
         say(f"small-building rule ({model.min_building_area:g} m²): {sb['relabelled_components']:,} of "
-            f"{sb['components']:,} predicted-building clusters relabelled ({sb['relabelled_points']:,} points)")
+            f"{sb['components']:,} predicted-building clusters relabelled ({sb['relabelled_points']:,} points)"
+            + (f"; see-through (> {model.max_multi_return_share:g} multi-return): {sb['see_through_components']:,} "
+               f"clusters ({sb['see_through_points']:,} points)" if model.max_multi_return_share < 1 else ""))
     say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "
         + ", ".join(f"class {c} {n:,}" for c, n in counts.items()) + f" ({t3 - t0:.1f} s)")
     return 0
+
+
+def _rule_overrides(model, args) -> None:
+    """--min-building-area / --max-multi-return-share given to predict or evaluate --model."""
+    if args.min_building_area is not None:
+        model.set_min_building_area(args.min_building_area)
+    if args.max_multi_return_share is not None:
+        model.set_max_multi_return_share(args.max_multi_return_share)
 
 
 def run_info(args) -> int:
@@ -362,7 +381,10 @@ def model_table(m: dict):
                                    for c in m["classes"]))
     t.add_row("features", f"{len(m['features'])} columns; radii {', '.join(f'{r:g}' for r in m['radii'])} m")
     area = m.get("min_building_area") or 0
-    t.add_row("small buildings", f"clusters under {area:g} m² get their next class" if area else "no object-size rule")
+    share = m.get("max_multi_return_share") or 1.0
+    t.add_row("small buildings", (f"clusters under {area:g} m² get their next class" + (
+        f"; so do larger ones with more than {share:g} of their points from multi-return pulses" if share < 1 else "")
+        if area else "no object-size rule"))
     cfg = m["config"]
     t.add_row("settings", f"ground {cfg['ground']}, HAG cap {cfg['hag_cap']}, max disc points "
                           f"{cfg['max_disc_points']}, terrain augment {cfg['terrain_augment']}, density augment "
@@ -391,8 +413,7 @@ def run_evaluate(args) -> int:
         model = load_model(args.model)
         if args.precomputed:
             model.features.precomputed = True
-        if args.min_building_area is not None:
-            model.set_min_building_area(args.min_building_area)
+        _rule_overrides(model, args)
         sec = evaluate_model(model, args.files, log=say, maps_dir=args.out)
         report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
                   "config": model.meta["config"], "features": model.feature_names,
