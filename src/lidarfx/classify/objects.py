@@ -10,10 +10,11 @@ an empty cell or of the data's bounding box) is kept whatever its size: a buildi
 cut by a tile edge cannot be measured.  docs/classification.md §2 and §6.13.
 
 A component large enough to be judged (footprint at least the minimum area) in
-which more than :data:`MAX_MULTI_RETURN_SHARE` of the points come from pulses
-with several returns also takes its next class: a roof stops the laser, a tree
-crown lets it through (docs/classification.md §6.16).  Clouds without
-``number_of_returns`` are not tested.
+which more than a given share of the points come from pulses with several
+returns also takes its next class: a roof stops the laser, a tree crown lets it
+through (the default share, 0.5, is
+:data:`lidarfx.classify.model.DEFAULT_MAX_MULTI_RETURN_SHARE`; docs/classification.md
+§6.16).  Clouds without ``number_of_returns`` are not tested.
 
 Clouds sparser than the default's link can bridge (mean spacing above half of
 it) get a longer link and larger edge cells: ``max(LINK, 2 / √density)``.
@@ -27,8 +28,8 @@ import numpy as np
 from ..errors import LidarfxError
 from ..geometry import group_hull_areas
 
-__all__ = ["BUILDING_CODE", "LINK", "EDGE_CELL", "EDGE_RING", "MAX_MULTI_RETURN_SHARE", "building_class", "edge_mask",
-           "link_for", "drop_small_objects"]
+__all__ = ["BUILDING_CODE", "LINK", "EDGE_CELL", "EDGE_RING", "building_class", "edge_mask", "link_for",
+           "check_share", "drop_small_objects"]
 
 BUILDING_CODE = 6
 """LAS code of buildings: the rule acts on the class holding it."""
@@ -38,8 +39,6 @@ EDGE_CELL = 1.0
 """Cell (m) of the occupancy grid that finds the edge of the data."""
 EDGE_RING = 2
 """Cells from an empty cell within which a point counts as at the edge."""
-MAX_MULTI_RETURN_SHARE = 0.5
-"""Largest share of points from multi-return pulses a judged building cluster may have (1 = no test)."""
 
 
 def building_class(classes) -> int | None:
