@@ -338,8 +338,9 @@ def run_predict(args) -> int:
     if sb:
         say(f"small-building rule ({model.min_building_area:g} m²): {sb['relabelled_components']:,} of "
             f"{sb['components']:,} predicted-building clusters relabelled ({sb['relabelled_points']:,} points)"
-            + (f"; see-through (> {model.max_multi_return_share:g} multi-return): {sb['see_through_components']:,} "
-               f"clusters ({sb['see_through_points']:,} points)" if model.max_multi_return_share < 1 else ""))
+            + (f"; see-through test (> {model.max_multi_return_share:g} of the points multi-return): "
+               f"{sb['see_through_components']:,} larger ones relabelled ({sb['see_through_points']:,} points)"
+               if model.max_multi_return_share < 1 else ""))
     say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "
         + ", ".join(f"class {c} {n:,}" for c, n in counts.items()) + f" ({t3 - t0:.1f} s)")
     return 0
