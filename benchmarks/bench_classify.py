@@ -164,20 +164,25 @@ def lidarfx_default(train_paths, test_paths, cmap, seed: int, log, classifier: s
     model = train(clouds, classes=cmap, classifier=classifier, seed=seed, log=lambda m: log("  lidarfx " + m))
     sec["train"] = time.perf_counter() - t
     k = len(cmap)
-    cms = {}
+    cms, rules = {}, {}
     for p in test_paths:
         t = time.perf_counter()
         c = read_usable(p)
         sec["read"] += time.perf_counter() - t
         t = time.perf_counter()
-        codes = model.predict(c)
+        rule: dict[str, int] = {}
+        codes = model.predict(c, stats=rule)
         sec["predict"] += time.perf_counter() - t
         ref = cmap.index_of(c["classification"])
         pred = cmap.index_of(codes)
         cms[p.name] = confusion_matrix(ref, np.where(ref >= 0, pred, 0), k)
-        log(f"  lidarfx predicted {p.name}: {len(c):,} points")
+        rules[p.name] = rule or None
+        log(f"  lidarfx predicted {p.name}: {len(c):,} points"
+            + (f"; building clusters {rule['components']:,}, small ones relabelled {rule['relabelled_components']:,} "
+               f"({rule['relabelled_points']:,} points), see-through ones {rule['see_through_components']:,} "
+               f"({rule['see_through_points']:,} points)" if rule else ""))
     sec["total"] = time.perf_counter() - t_all
-    return {"confusion": cms, "seconds": sec, "features": len(model.feature_names),
+    return {"confusion": cms, "building_rule": rules, "seconds": sec, "features": len(model.feature_names),
             "train_points": int(sum(model.meta["training"]["counts"]["used"].values())),
             "training_seconds": model.meta["training"]["seconds"]}
 
