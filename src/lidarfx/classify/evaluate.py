@@ -766,7 +766,7 @@ def format_report(report: dict[str, Any]) -> str:
         out.append("")
     imp = report.get("importance")
     if imp:
-        out.append(f"== feature importance (top 15) ==")
+        out.append("== feature importance (top 15) ==")
         out.append(f"impurity ({imp.get('impurity_model')}):")
         for r in imp["impurity"][:15]:
             out.append(f"  {r['name']:<32} {r['importance']:.4f}")
