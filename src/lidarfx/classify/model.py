@@ -10,7 +10,6 @@ any other type is refused before anything in it is built.
 from __future__ import annotations
 
 import datetime as _dt
-import math
 import os
 import time
 import warnings
@@ -155,11 +154,9 @@ class TrainConfig:
             self.density_augment = None
         if self.min_building_area is None:  # auto: part of the ALS default only (docs/classification.md §2)
             self.min_building_area = DEFAULT_MIN_BUILDING_AREA if self.features is None else 0.0
-        self.min_building_area = float(self.min_building_area)
-        if not (self.min_building_area >= 0 and math.isfinite(self.min_building_area)):
-            raise LidarfxError(f"min_building_area must be a number of m² >= 0, got {self.min_building_area}")
-        from .objects import check_share
+        from .objects import check_area, check_share
 
+        self.min_building_area = check_area(self.min_building_area)
         self.max_multi_return_share = check_share(self.max_multi_return_share)
         if self.max_per_class is not None and int(self.max_per_class) < 1:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
@@ -486,9 +483,9 @@ class ClassifierModel:
 
     def set_min_building_area(self, area: float) -> None:
         """Change the object-size rule of this model (m²; 0 = off); kept when the model is saved."""
-        area = float(area)
-        if not (area >= 0 and math.isfinite(area)):
-            raise LidarfxError(f"the minimum building area must be a number of m² >= 0, got {area}")
+        from .objects import check_area
+
+        area = check_area(area)
         self.meta = {**self.meta, "config": {**self.meta["config"], "min_building_area": area}}
 
     @property

@@ -29,7 +29,7 @@ from ..errors import LidarfxError
 from ..geometry import group_hull_areas
 
 __all__ = ["BUILDING_CODE", "LINK", "EDGE_CELL", "EDGE_RING", "building_class", "edge_mask", "link_for",
-           "check_share", "drop_small_objects"]
+           "check_area", "check_share", "drop_small_objects"]
 
 BUILDING_CODE = 6
 """LAS code of buildings: the rule acts on the class holding it."""
@@ -81,6 +81,14 @@ def edge_mask(xy: np.ndarray, cell: float = EDGE_CELL, ring: int = EDGE_RING) ->
     return near[inv.ravel()]
 
 
+def check_area(area: float) -> float:
+    """``area`` as a float number of m² >= 0 (0 = no rule), or a one-line error."""
+    area = float(area)
+    if not (area >= 0 and math.isfinite(area)):
+        raise LidarfxError(f"the minimum building area must be a number of m² >= 0, got {area!r}")
+    return area
+
+
 def check_share(share: float) -> float:
     """``share`` as a float in (0, 1], or a one-line error."""
     share = float(share)
@@ -104,8 +112,7 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     given, receives the numbers of components found, kept at the edge and relabelled
     (small ones, see-through ones), and of points relabelled."""
     labels = np.asarray(labels)
-    if not (min_area >= 0 and math.isfinite(min_area)):
-        raise LidarfxError(f"the minimum building area must be a number of m² >= 0, got {min_area!r}")
+    min_area = check_area(min_area)
     share = check_share(max_multi_return_share)
     out = labels.copy()
     b = np.flatnonzero(labels == target)
