@@ -75,13 +75,13 @@ TRUSTED_TYPES: tuple[str, ...] = (
 DEFAULT_MAX_PER_CLASS = 20_000
 
 #: predicted-building clusters with a smaller plan footprint (m²) are given their next most
-#: probable class (:mod:`.objects`); chosen on the training tiles (docs/classification.md §6.13).
+#: probable class (:mod:`.objects`); chosen on the training tiles (docs/classification-record.md §6.13).
 #: Part of the ALS default: with a feature list of one's own (e.g. TLS) the rule is off unless asked for
 DEFAULT_MIN_BUILDING_AREA = 10.0
 
 #: a predicted-building cluster of at least that area in which more than this share of the points
-#: come from multi-return pulses is given its next class (see-through test; docs/classification.md
-#: §6.16); 1 = no test.  Acts only together with the minimum area above
+#: come from multi-return pulses is given its next class (see-through test;
+#: docs/classification-record.md §6.16); 1 = no test.  Acts only together with the minimum area above
 DEFAULT_MAX_MULTI_RETURN_SHARE = 0.5
 
 #: prediction computes and classifies the features of this many points at a time: the feature
