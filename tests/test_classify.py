@@ -528,7 +528,9 @@ def test_evaluate_random_vs_blocks_and_report(tmp_path, facades):
     assert rep["importance"]["impurity"][0]["importance"] >= rep["importance"]["impurity"][-1]["importance"]
     files = write_report(rep, tmp_path / "rep")
     names = {p.name for p in files}
-    assert {"report.txt", "report.json", "confusion_cv_random.png", "confusion_cv_blocks.png"} <= names
+    assert {"report.txt", "report.json", "confusion_cv_random.png", "confusion_cv_blocks.png", "importance.png"} <= names
+    assert "backward_elimination.png" not in names  # not asked for
+    assert (tmp_path / "rep" / "importance.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     js = json.loads((tmp_path / "rep" / "report.json").read_text())
     assert js["layout"] == "rows = reference, columns = predicted"
     assert js["sections"]["cv_blocks"]["metrics"]["confusion"] == bl["confusion"]
@@ -596,6 +598,30 @@ def test_importance_and_backward_elimination(facades):
     assert ns == sorted(ns, reverse=True) and ns[-1] == 1
     assert "noise" in be["steps"][0]["removed"]  # the noise column goes first
     assert be["best"]["mean_f1"] >= max(s["mean_f1"] for s in be["steps"]) - be["tolerance"]
+
+
+def test_importance_and_elimination_pictures(tmp_path):
+    import matplotlib.image as mpimg
+
+    from lidarfx.classify import plot_elimination, plot_importance, write_report
+
+    imp = {"impurity": [{"name": f"f{i}", "importance": 1.0 / (i + 1)} for i in range(30)],
+           "impurity_model": "random forest"}
+    p = plot_importance(imp, tmp_path / "imp1.png", top=5)  # impurity only: one panel
+    w1 = mpimg.imread(p).shape[1]
+    imp["permutation"] = [{"name": f"f{i}", "mean": 0.1 - 0.01 * i, "std": 0.005} for i in range(8)]
+    w2 = mpimg.imread(plot_importance(imp, tmp_path / "imp2.png", top=5)).shape[1]
+    assert w2 > 1.8 * w1  # two panels
+    be = {"steps": [{"n_features": n, "oa": 0.9 + 0.001 * n, "mean_f1": 0.88 + 0.001 * n, "features": [],
+                     "removed": []} for n in (10, 9, 8, 7, 6, 5, 4, 3, 2, 1)], "tolerance": 0.005}
+    be["best"] = be["steps"][5]
+    assert plot_elimination(be, tmp_path / "be.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the report writer draws both when the report has them, and nothing is left half-written
+    rep = {"sections": {}, "importance": imp, "backward_elimination": be, "features": ["f0"], "train_files": [],
+           "config": {"classifier": "rf", "radii": [1.0], "max_per_class": 100}}
+    names = sorted(p.name for p in write_report(rep, tmp_path / "out"))
+    assert names == ["backward_elimination.png", "importance.png", "report.json", "report.txt"]
+    assert sorted(f.name for f in (tmp_path / "out").iterdir()) == names
 
 
 # --------------------------------------------------------------------------- CLI

@@ -1,4 +1,4 @@
-"""Every relative link in the README and docs/ points at a file that exists and, for a
+"""Every relative link and picture in the README and docs/ points at a file that exists and, for a
 Markdown file, at a heading that exists (GitHub's anchor rules)."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted([ROOT / "README.md", ROOT / "benchmarks" / "README.md", *(ROOT / "docs").glob("*.md")])
 
-INLINE = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)")
+INLINE = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 REFDEF = re.compile(r"^\[([^\]]+)\]:\s*(\S+)", re.M)
 REFUSE = re.compile(r"\[[^\]]+\]\[([^\]]+)\]")
 

@@ -27,6 +27,8 @@ from .evaluate import (
     format_report,
     metrics,
     plot_confusion,
+    plot_elimination,
+    plot_importance,
     random_folds,
     write_report,
 )
@@ -52,7 +54,7 @@ __all__ = [
     "ASPRS_NAMES", "DEFAULT_IGNORE", "ClassMap",
     "block_buffer_mask", "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "file_buffer_mask",
     "format_report", "metrics",
-    "plot_confusion", "random_folds", "write_report",
+    "plot_confusion", "plot_elimination", "plot_importance", "random_folds", "write_report",
     "backward_elimination", "impurity_importance", "permutation_importance",
     "drop_small_objects", "TRUSTED_TYPES", "ClassifierModel", "TrainConfig", "load_model", "read_sources", "train",
     "CLASSIFIERS", "DEFAULT_FEATURES", "DEFAULT_RADII", "EXTRA_INPUTS", "CloudSample", "LidarFeatures",

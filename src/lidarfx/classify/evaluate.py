@@ -43,7 +43,8 @@ from .objects import building_class
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask",
-           "file_buffer_mask", "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion"]
+           "file_buffer_mask", "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion",
+           "plot_importance", "plot_elimination"]
 
 LAYOUT = "rows = reference, columns = predicted"
 
@@ -817,6 +818,10 @@ def write_report(report: dict[str, Any], out_dir: str | os.PathLike) -> list[Pat
                                               title=f"test: {Path(name).name}"))
         if key == "test":
             written += [Path(m["error_map"]) for m in sec["files"].values() if m.get("error_map")]
+    if report.get("importance"):
+        written.append(plot_importance(report["importance"], d / "importance.png"))
+    if report.get("backward_elimination"):
+        written.append(plot_elimination(report["backward_elimination"], d / "backward_elimination.png"))
     return written
 
 
@@ -860,3 +865,64 @@ def plot_confusion(m: dict[str, Any], path: str | os.PathLike, title: str | None
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return p
+
+
+def plot_importance(imp: dict[str, Any], path: str | os.PathLike, top: int = 20) -> Path:
+    """Feature-importance PNG: the ``top`` features by impurity importance and, when the
+    report has it, by permutation importance (drop of mean F1, bars ± one standard
+    deviation over the repeats), largest at the top; ``imp`` as in ``report["importance"]``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..render import _save
+
+    panels = [("impurity", "importance", None, f"impurity: {imp.get('impurity_model', '')}")]
+    if imp.get("permutation"):
+        panels.append(("permutation", "mean", "std", f"permutation, drop of mean F1: {imp.get('permutation_data', '')}"))
+    n = max(min(top, len(imp[key])) for key, *_ in panels)
+    fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 1.2 + 0.26 * n), squeeze=False)
+    for ax, (key, val, err, title) in zip(axes[0], panels):
+        rows = imp[key][:top][::-1]  # largest at the top
+        pos = np.arange(len(rows))
+        ax.barh(pos, [r[val] for r in rows], xerr=[r[err] for r in rows] if err else None,
+                color="#4c72b0", ecolor="0.3", capsize=2)
+        ax.set_yticks(pos, [r["name"] for r in rows], fontsize=7)
+        ax.axvline(0.0, color="0.5", lw=0.6)
+        ax.set_title(title, fontsize=8, wrap=True)
+        ax.tick_params(axis="x", labelsize=7)
+    fig.suptitle(f"feature importance (top {n})", fontsize=9)
+    return _save(fig, path, dpi=110)
+
+
+def plot_elimination(be: dict[str, Any], path: str | os.PathLike) -> Path:
+    """Backward-elimination PNG (Chehata et al. 2009): cross-validated OA and mean F1 against
+    the number of features kept, from all features down to one, with the smallest set within
+    the tolerance of the best mean F1 marked; ``be`` as in ``report["backward_elimination"]``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..render import _save
+
+    steps = be["steps"]
+    n = [s["n_features"] for s in steps]
+    f1 = np.array([np.nan if s["mean_f1"] is None else s["mean_f1"] for s in steps], dtype=float)
+    oa = np.array([np.nan if s["oa"] is None else s["oa"] for s in steps], dtype=float)
+    best = be["best"]
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    ax.plot(n, oa, "o-", ms=3, label="OA")
+    ax.plot(n, f1, "s-", ms=3, label="mean F1")
+    top = np.nanmax(f1)
+    ax.axhspan(top - be["tolerance"], top, color="0.85", label=f"within {be['tolerance']:g} of the best mean F1")
+    ax.axvline(best["n_features"], color="C3", lw=1, ls="--",
+               label=f"smallest such set: {best['n_features']} features")
+    ax.set_xlim(max(n) + 0.5, 0.5)  # as the elimination runs: all features on the left
+    ax.set_xlabel("features kept")
+    ax.set_ylabel("cross-validated score")
+    ax.set_title("backward elimination (random forest, impurity importance)", fontsize=9)
+    ax.legend(fontsize=7, loc="lower left")
+    ax.grid(alpha=0.3)
+    return _save(fig, path, dpi=110)

@@ -205,7 +205,8 @@ def register(sub) -> None:
                    help="Chehata-style backward feature elimination with a random forest (slow)")
     e.add_argument("-o", "--out", default=None, metavar="DIR",
                    help="write report.txt, report.json and confusion_*.png to DIR; with --model or --test "
-                        "also a plan-view error map errors_<file>.png per test file")
+                        "also a plan-view error map errors_<file>.png per test file; importance.png and "
+                        "backward_elimination.png with those options")
     _add_train_options(e)
     _add_common(e)
     e.set_defaults(func=run_evaluate)
