@@ -656,6 +656,14 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     ok = ref != 7
     assert (pred["classification"][ok] == ref[ok]).mean() > 0.95
     assert pred["confidence"].dtype == np.float32
+    assert main(["classify", "predict", str(pb), str(d / "b_prob.laz"), "--model", str(model), "--probabilities",
+                 "-q", "--json"]) == 0
+    names = {f"probability_{n}": n for n in ("ground", "vegetation", "wall", "roof", "window", "clutter")}
+    assert json.loads(capsys.readouterr().out)["probabilities"] == names
+    prob = lidarfx.read(d / "b_prob.laz")
+    assert all(prob[n].dtype == np.float32 for n in names) and "confidence" not in prob
+    np.testing.assert_allclose(sum(prob[n] for n in names), 1.0, atol=1e-5)
+    np.testing.assert_array_equal(prob["classification"], pred["classification"])
     capsys.readouterr()
     assert main(["classify", "evaluate", str(pb), "--model", str(model), "--out", str(d / "ev"), "--json", "-q"]) == 0
     rep = json.loads(capsys.readouterr().out)
@@ -883,6 +891,41 @@ def test_prediction_in_chunks_equals_one_pass(facades, rf_model, monkeypatch):
     assert np.array_equal(proba, proba2)
     assert np.array_equal(rf_model.feature_matrix(b.subset(usable) if not usable.all() else b), X, equal_nan=True)
     assert np.array_equal(codes, rf_model.predict(b))  # the no-confidence path gives the same classes
+
+
+def test_per_class_probabilities(facades, rf_model):
+    b = facades[1].copy()
+    flag = np.zeros(len(b), np.uint8)
+    flag[:50] = 1  # withheld: not predicted
+    b["withheld"] = flag
+    codes, conf, proba = rf_model.predict(b, return_confidence=True, return_proba=True)
+    p2, usable = rf_model.predict_proba(b)
+    assert proba.dtype == np.float32 and proba.shape == (len(b), len(rf_model.classes))
+    assert np.isnan(proba[:50]).all() and not np.isnan(proba[50:]).any()
+    np.testing.assert_array_equal(proba[usable], p2.astype(np.float32))
+    np.testing.assert_allclose(proba[usable].sum(axis=1), 1.0, atol=1e-5)
+    assert np.array_equal(conf[usable], proba[usable].max(axis=1))  # no building rule on this model
+    assert np.array_equal(codes[usable], rf_model.classes.code_of(proba[usable].argmax(axis=1)))
+    codes_only, proba_only = rf_model.predict(b, return_proba=True)
+    assert np.array_equal(codes_only, codes) and np.array_equal(proba_only, proba, equal_nan=True)
+    out = rf_model.classify(b, probabilities=True)
+    names = rf_model.probability_names()
+    assert names == ["probability_" + n for n in rf_model.classes.names]
+    for j, name in enumerate(names):
+        assert np.array_equal(out[name], proba[:, j], equal_nan=True)
+    assert "confidence" not in out
+
+
+def test_probability_names_fall_back_to_codes():
+    from lidarfx.classify.model import ClassifierModel
+
+    m = ClassifierModel.__new__(ClassifierModel)
+    m.classes = ClassMap.parse("Low Veg=3,low-veg=4,ground=2")  # the same after cleaning: codes
+    assert m.probability_names() == ["probability_3", "probability_4", "probability_2"]
+    m.classes = ClassMap.parse("Low Veg=3,ground=2")
+    assert m.probability_names() == ["probability_low_veg", "probability_ground"]
+    m.classes = ClassMap.parse(f"{'x' * 21}=3,ground=2")  # 33 characters: too long for LAS
+    assert m.probability_names() == ["probability_3", "probability_2"]
 
 
 def test_transform_of_several_clouds_equals_one_cloud_at_a_time(facades):

@@ -211,6 +211,10 @@ def test_model_stores_and_applies_the_rule(town_model, tmp_path):
     codes, conf = town_model.predict(cloud, return_confidence=True)
     assert (codes == rule).all() and np.isfinite(conf).all()
     assert (conf[changed] <= 0.5).all() and (conf[~changed] >= 1 / 3).all()
+    # the per-class probabilities are the classifier's, before the rule: building is still the top class there
+    _, proba = town_model.predict(cloud, return_proba=True)
+    top = town_model.classes.code_of(proba.argmax(axis=1))
+    assert (top == plain).all() and (top[changed] == 6).all()
     town_model.set_min_building_area(0)
     try:
         path = town_model.save(tmp_path / "m.skops")

@@ -504,10 +504,14 @@ class ClassifierModel:
 
     def predict(self, cloud: PointCloud, *, progress: bool | None = False, return_confidence: bool = False,
                 check_density: bool = True, min_building_area: float | None = None,
-                max_multi_return_share: float | None = None, stats: dict | None = None):
+                max_multi_return_share: float | None = None, stats: dict | None = None,
+                return_proba: bool = False):
         """Output class code of every point (int16); −1 where not predicted (virtual /
         withheld / synthetic points).  With ``return_confidence`` also the probability of
-        the class given (float32, NaN where not predicted).  ``check_density``:
+        the class given (float32, NaN where not predicted), and with ``return_proba`` last
+        the classifier's probabilities of every class (float32, n × classes in the order of
+        :attr:`classes`, before the building rule below; NaN rows where not predicted), so
+        ``codes, conf, proba`` with both.  ``check_density``:
         warn when the cloud is much sparser than the training data (:meth:`density_check`).
 
         Predicted-building clusters smaller than ``min_building_area`` m² (default: the
@@ -529,12 +533,15 @@ class ClassifierModel:
         best = np.empty(len(sub), dtype=np.float32) if return_confidence else None
         alt = np.empty(len(sub), dtype=np.int16) if target is not None else None
         alt_p = np.empty(len(sub), dtype=np.float32) if (alt is not None and best is not None) else None
+        every = np.empty((len(sub), len(self.classes)), dtype=np.float32) if return_proba else None
         for rows, X in self.feature_chunks(sub, progress=progress):  # bounded memory on large clouds
-            if best is None and alt is None:
+            if best is None and alt is None and every is None:
                 k[rows] = self._predict_matrix(X)
                 continue
             proba = self._proba_matrix(X)
             k[rows] = proba.argmax(axis=1)
+            if every is not None:
+                every[rows] = proba
             if best is not None:
                 best[rows] = proba[np.arange(len(proba)), k[rows]]
             if alt is not None:
@@ -556,28 +563,54 @@ class ClassifierModel:
             stats.clear()
         codes = np.full(len(cloud), -1, dtype=np.int16)
         codes[usable] = self.classes.code_of(k)
-        if best is None:
-            return codes
-        conf = np.full(len(cloud), np.nan, dtype=np.float32)
-        conf[usable] = best
-        return codes, conf
+        out: list[np.ndarray] = [codes]
+        if best is not None:
+            conf = np.full(len(cloud), np.nan, dtype=np.float32)
+            conf[usable] = best
+            out.append(conf)
+        if every is not None:
+            proba_all = np.full((len(cloud), len(self.classes)), np.nan, dtype=np.float32)
+            proba_all[usable] = every
+            out.append(proba_all)
+        return out[0] if len(out) == 1 else tuple(out)
 
-    def classify(self, cloud: PointCloud, *, confidence: bool = False, progress: bool | None = False) -> PointCloud:
+    def probability_names(self) -> list[str]:
+        """The attribute names :meth:`classify` gives the class probabilities:
+        ``probability_<class name>`` (lower case, other characters than letters, digits and
+        ``_`` made ``_``), or ``probability_<code>`` for every class when a name would not fit
+        the 32 characters of a LAS extra dimension or two names would be the same."""
+        import re
+
+        names = ["probability_" + re.sub(r"[^0-9a-z_]", "_", str(n).lower()) for n in self.classes.names]
+        if len(set(names)) < len(names) or max(len(n) for n in names) > 32:
+            names = [f"probability_{int(c)}" for c in self.classes.codes]
+        return names
+
+    def classify(self, cloud: PointCloud, *, confidence: bool = False, probabilities: bool = False,
+                 progress: bool | None = False) -> PointCloud:
         """A copy of ``cloud`` with ``classification`` set to the predicted codes (points
         not predicted keep their class, or get 1 = unclassified); optionally a
-        float32 ``confidence`` attribute (highest class probability)."""
+        float32 ``confidence`` attribute (the probability of the class given) and, with
+        ``probabilities``, one float32 attribute per class (:meth:`probability_names`: the
+        classifier's probabilities, before the building rule; NaN where not predicted)."""
         warn_unusable(cloud, usable_mask(cloud), str(cloud.meta.get("source") or cloud.meta.get("name") or "the cloud"))
         dens = self.density_check(cloud)
         rule: dict[str, Any] = {}
         res = self.predict(cloud, progress=progress, return_confidence=confidence, check_density=False,
-                           stats=rule)
-        codes, conf = res if confidence else (res, None)
+                           stats=rule, return_proba=probabilities)
+        res = list(res) if isinstance(res, tuple) else [res]
+        codes = res.pop(0)
+        conf = res.pop(0) if confidence else None
+        proba = res.pop(0) if probabilities else None
         out = cloud.copy() if hasattr(cloud, "copy") else PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
         old = out.get("classification")
         cls = np.where(codes >= 0, codes, np.asarray(old) if old is not None else 1).astype(np.uint8)
         out["classification"] = cls
         if conf is not None:
             out["confidence"] = conf
+        if proba is not None:
+            for j, name in enumerate(self.probability_names()):
+                out[name] = np.ascontiguousarray(proba[:, j])
         out.meta = {**out.meta, "classify": {"model_classes": self.classes.spec(),
                                              "predicted_points": int((codes >= 0).sum()),
                                              "density": dens,

@@ -56,6 +56,7 @@ PREDICT_EPILOG = """examples:
   lidarfx classify predict new_fx.laz out.laz --model m.skops --precomputed   # features already in the file
   lidarfx classify predict delivered.laz out.laz --model m.skops --ground class   # the file's class 2 is the ground
   lidarfx classify predict new.laz out.laz --model m.skops --picture classes.png  # + a plan-view class map
+  lidarfx classify predict new.laz out.laz --model m.skops --probabilities  # + probability_ground, ... per point
 """
 
 
@@ -154,12 +155,15 @@ def register(sub) -> None:
 
     pr = cs.add_parser("predict", help="classify a cloud with a trained model", epilog=PREDICT_EPILOG,
                        description="Classify every point of a cloud with a trained model; writes the "
-                                   "classification field (and optionally a confidence attribute).",
+                                   "classification field (and optionally the confidence and per-class probabilities).",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     pr.add_argument("input", help="input point cloud")
     pr.add_argument("output", help="output point cloud (format from the extension)")
     pr.add_argument("-m", "--model", required=True, help="model file written by 'lidarfx classify train'")
     pr.add_argument("--confidence", action="store_true", help="add a float32 'confidence' attribute (top probability)")
+    pr.add_argument("--probabilities", action="store_true",
+                    help="add one float32 attribute per class, probability_<class name>: the classifier's "
+                         "probabilities (before the building rule)")
     pr.add_argument("--precomputed", action="store_true",
                     help="read the neighbourhood features from the input's attributes")
     pr.add_argument("--ground", choices=["smrf", "class"], default=None,
@@ -308,7 +312,8 @@ def run_predict(args) -> int:
     model.check(cloud, args.input)
     t1 = time.perf_counter()
     _rule_overrides(model, args)
-    out = model.classify(cloud, confidence=args.confidence, progress=False if args.quiet else None)
+    out = model.classify(cloud, confidence=args.confidence, probabilities=args.probabilities,
+                         progress=False if args.quiet else None)
     t2 = time.perf_counter()
     io.write(out, args.output, progress=False if args.quiet else None)
     t3 = time.perf_counter()
@@ -330,6 +335,7 @@ def run_predict(args) -> int:
                "min_building_area": model.min_building_area,
                "max_multi_return_share": model.max_multi_return_share,
                "small_buildings": out.meta["classify"].get("small_buildings"),
+               "probabilities": dict(zip(model.probability_names(), model.classes.names)) if args.probabilities else None,
                "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:
