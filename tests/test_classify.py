@@ -659,11 +659,24 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     assert main(["classify", "predict", str(pb), str(d / "b_prob.laz"), "--model", str(model), "--probabilities",
                  "-q", "--json"]) == 0
     names = {f"probability_{n}": n for n in ("ground", "vegetation", "wall", "roof", "window", "clutter")}
-    assert json.loads(capsys.readouterr().out)["probabilities"] == names
+    js = json.loads(capsys.readouterr().out)
+    assert js["probabilities"] == names and js["upgraded_point_format"] is None  # a LAS 1.4 input
     prob = lidarfx.read(d / "b_prob.laz")
     assert all(prob[n].dtype == np.float32 for n in names) and "confidence" not in prob
     np.testing.assert_allclose(sum(prob[n] for n in names), 1.0, atol=1e-5)
     np.testing.assert_array_equal(prob["classification"], pred["classification"])
+    # a legacy point format stores classes 0-31 only: codes 64-66 make predict write LAS 1.4 format 6, and say so
+    legacy = lidarfx.read(pb)
+    legacy["classification"] = np.ones(len(legacy), np.uint8)
+    lidarfx.write(legacy, d / "b_pf1.las", point_format=1)
+    assert main(["classify", "predict", str(d / "b_pf1.las"), str(d / "b_pf1_pred.laz"), "--model", str(model),
+                 "--json"]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["upgraded_point_format"] == 6
+    assert "writing LAS 1.4 point format 6" in cap.err
+    up = lidarfx.read(d / "b_pf1_pred.laz")
+    assert up.header.point_format.id == 6 and up["classification"].max() > 31
+    np.testing.assert_array_equal(up["classification"], pred["classification"])
     capsys.readouterr()
     assert main(["classify", "evaluate", str(pb), "--model", str(model), "--out", str(d / "ev"), "--json", "-q"]) == 0
     rep = json.loads(capsys.readouterr().out)

@@ -745,3 +745,19 @@ def test_write_one_million_points_with_20_features_is_fast(tmp_path):
     write(cloud, tmp_path / "big.las")
     assert time.perf_counter() - t0 < 1.5
     assert laspy.open(tmp_path / "big.las").header.point_count == n
+
+
+def test_format_for_classes_upgrades_legacy_formats_only():
+    import laspy
+
+    from lidarfx.io.las import format_for_classes
+
+    assert format_for_classes(None, 66) is None  # not a LAS cloud
+    for legacy, modern in {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}.items():
+        h = laspy.LasHeader(point_format=legacy, version="1.2" if legacy < 4 else "1.3")
+        assert format_for_classes(h, 31) is None  # 5 bits hold 0..31
+        assert format_for_classes(h, 32) == modern
+        # the 1.4 format holds every field of the legacy one
+        assert set(laspy.PointFormat(legacy).dimension_names) - {"classification_flags", "scan_angle_rank"} <= \
+            set(laspy.PointFormat(modern).dimension_names)
+    assert format_for_classes(laspy.LasHeader(point_format=6, version="1.4"), 66) is None

@@ -312,10 +312,19 @@ def run_predict(args) -> int:
     model.check(cloud, args.input)
     t1 = time.perf_counter()
     _rule_overrides(model, args)
+    opts = {}
+    if Path(args.output).suffix.lower() in (".las", ".laz"):
+        from ..io.las import format_for_classes
+
+        pf = format_for_classes(cloud.header, max(int(c) for c in model.classes.codes))
+        if pf is not None:  # decided before the work, not found out when writing
+            opts["point_format"] = pf
+            say(f"note: the model's class codes go up to {max(model.classes.codes)}, which LAS point format "
+                f"{cloud.header.point_format.id} cannot store (0-31); writing LAS 1.4 point format {pf}")
     out = model.classify(cloud, confidence=args.confidence, probabilities=args.probabilities,
                          progress=False if args.quiet else None)
     t2 = time.perf_counter()
-    io.write(out, args.output, progress=False if args.quiet else None)
+    io.write(out, args.output, progress=False if args.quiet else None, **opts)
     t3 = time.perf_counter()
     cls = np.asarray(out["classification"])
     if args.picture:
@@ -336,6 +345,7 @@ def run_predict(args) -> int:
                "max_multi_return_share": model.max_multi_return_share,
                "small_buildings": out.meta["classify"].get("small_buildings"),
                "probabilities": dict(zip(model.probability_names(), model.classes.names)) if args.probabilities else None,
+               "upgraded_point_format": opts.get("point_format"),
                "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
     if args.json:

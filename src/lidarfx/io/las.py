@@ -50,6 +50,7 @@ __all__ = [
     "crs_info",
     "header_info",
     "standard_dtypes",
+    "format_for_classes",
     "LasHeader",
     "READ_ERRORS",
 ]
@@ -279,6 +280,22 @@ def _choose_point_format(source: LasHeader | None, names: set[str], requested: i
         if want <= set(PointFormat(cand).standard_dimension_names):
             return cand
     return pf_id  # e.g. NIR on a legacy format: becomes an extra dimension
+
+
+#: the LAS 1.4 point format that holds everything a legacy format (0-5) holds, and a full classification byte
+_LEGACY_TO_14 = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+#: the largest class code the 5-bit classification of point formats 0-5 stores
+LEGACY_MAX_CLASS = 31
+
+
+def format_for_classes(header: LasHeader | None, max_code: int) -> int | None:
+    """The point format to write class codes up to ``max_code`` over a cloud read with
+    ``header``: ``None`` when its own format stores them (or there is no LAS header),
+    else the LAS 1.4 format with the same fields (0, 1 → 6; 2, 3 → 7; 4 → 9; 5 → 10),
+    whose classification is a whole byte instead of the legacy formats' 5 bits (0-31)."""
+    if not isinstance(header, LasHeader) or max_code <= LEGACY_MAX_CLASS:
+        return None
+    return _LEGACY_TO_14.get(header.point_format.id)
 
 
 def _compatible_version(version: str, pf_id: int) -> str:
