@@ -706,6 +706,12 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops", "--picture", "{d}/no/map.png"],
          "folder does not exist"),
         (["evaluate", "{a}", "--cv", "1"], "at least 2 folds"),
+        # a trained model brings its own classes, features and settings: training options are refused, not ignored
+        (["evaluate", "{a}", "--model", "{d}/none.skops", "--classes", "2,6", "--importance"],
+         "it does not take --classes, --importance"),
+        (["evaluate", "{a}", "--model", "{d}/none.skops", "--cv", "3", "-r", "2"], "it does not take --cv, --radius"),
+        (["train", "{a}", "--model", "{d}/x.skops", "--classes", "2,99", "--features", "eigen", "-r", "0.5"],
+         "no training points of 'class 99' (the usable points hold the classes [2, 5, 6, 7, 64, 65, 66]"),
         (["train", "{a}", "--model", "{d}/x.skops", "--density-augment", "0.5,2"], "between 0 and 1"),
         (["evaluate", "{a}", "--classes", "2,6", "--features", "eigen", "-r", "0.5", "--spatial-blocks", "5000",
           "--cv", "5", "--no-random-folds"], "spatial block"),  # the scene straddles x = 0, y = 0: 4 blocks

@@ -799,8 +799,12 @@ def labelled_sample(sources: list[Source], classes: ClassMap, max_per_class: int
     }
     missing = [classes.names[c] for c in range(len(classes)) if not (y == c).any()]
     if missing:
-        raise LidarfxError(f"no training points of class {', '.join(missing)} "
-                           f"(classes in the data: check --classes)")
+        present: set[int] = set()
+        for s in sources:
+            if "classification" in s.cloud:
+                present |= set(np.unique(np.asarray(s.cloud["classification"])[usable_mask(s.cloud)]).tolist())
+        raise LidarfxError(f"no training points of {', '.join(repr(m) for m in missing)} (the usable points "
+                           f"hold the classes {sorted(present) or 'none'}; check --classes)")
     return samples, y.astype(np.int64), counts
 
 

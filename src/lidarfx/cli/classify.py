@@ -65,7 +65,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
 
 
-def _add_train_options(p: argparse.ArgumentParser) -> None:
+def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g = p.add_argument_group("model")
     g.add_argument("-f", "--features", default=None,
                    help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
@@ -117,6 +117,7 @@ def _add_train_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--jobs", type=int, default=None,
                    help="threads of the classifier fit (rf: all cores; hgb: the cores idle when the fit "
                         "starts, see docs)")
+    return g
 
 
 def _fractions(text: str | None) -> list[float] | None:
@@ -211,9 +212,15 @@ def register(sub) -> None:
                    help="write report.txt, report.json and confusion_*.png to DIR; with --model or --test "
                         "also a plan-view error map errors_<file>.png per test file; importance.png and "
                         "backward_elimination.png with those options")
-    _add_train_options(e)
+    g = _add_train_options(e)
     _add_common(e)
-    e.set_defaults(func=run_evaluate)
+    # what --model cannot use: the options that configure a training or a cross-validation
+    applies = {"precomputed", "min_building_area", "max_multi_return_share"}
+    fixed = [a for a in g._group_actions if a.dest not in applies] + [
+        a for a in e._actions if a.dest in ("spatial_blocks", "buffer", "no_random_folds", "importance",
+                                            "backward_elimination")]
+    e.set_defaults(func=run_evaluate,
+                   not_with_model=[(a.dest, a.default, a.option_strings[-1]) for a in fixed])
 
     def _usage(args) -> int:
         p.print_help(sys.stderr)
@@ -426,8 +433,12 @@ def run_evaluate(args) -> int:
     if args.out:
         _out_dir(args.out, create=False)  # a file in the way fails before the work
     if args.model:
-        if args.test or args.cv or args.leave_one_out:
-            raise LidarfxError("--model evaluates a trained model on FILES; it does not take --cv/--test/--leave-one-out")
+        given = [opt for dest, default, opt in args.not_with_model if getattr(args, dest) != default]
+        if args.test or args.cv or args.leave_one_out or given:
+            given = [o for o, on in (("--cv", args.cv), ("--test", args.test), ("--leave-one-out", args.leave_one_out))
+                     if on] + given
+            raise LidarfxError(f"--model evaluates a trained model on FILES with its own classes, features and "
+                               f"settings; it does not take {', '.join(given)}")
         model = load_model(args.model)
         if args.precomputed:
             model.features.precomputed = True
