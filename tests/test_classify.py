@@ -422,7 +422,7 @@ def test_model_roundtrip_identical_predictions(tmp_path, facades, rf_model):
 @pytest.mark.parametrize("kind", ["hgb", "nb"])
 def test_model_roundtrip_other_classifiers(tmp_path, facades, kind):
     a, b = facades
-    m = train(a, classes="2,5,6", classifier=kind, n_estimators=30, features="eigen", radii=[0.5], max_per_class=500)
+    m = train(a, classes="2,5,6", classifier=kind, n_estimators=30 if kind != "nb" else None, features="eigen", radii=[0.5], max_per_class=500)
     loaded = load_model(m.save(tmp_path / f"{kind}.skops"))
     np.testing.assert_array_equal(loaded.predict(b), m.predict(b))
     # boosting predicts through the numba tree walker, with scikit-learn's exact answers
@@ -431,6 +431,21 @@ def test_model_roundtrip_other_classifiers(tmp_path, facades, kind):
     codes, conf = loaded.predict(b, return_confidence=True)
     np.testing.assert_array_equal(codes, loaded.classes.code_of(loaded.estimator.predict(X)))
     np.testing.assert_array_equal(conf, loaded.estimator.predict_proba(X).max(axis=1).astype(np.float32))
+
+
+def test_model_files_with_settings_once_ignored_still_load(tmp_path, facades):
+    import skops.io as sio
+
+    a, _ = facades
+    m = train(a, classes="2,5,6", classifier="nb", features="eigen", radii=[0.5], max_per_class=300)
+    path = m.save(tmp_path / "nb.skops")
+    obj = sio.load(path, trusted=sio.get_untrusted_types(file=path))
+    obj["meta"]["config"].update(n_estimators=50, k=10)  # what a model written before they were refused may hold
+    sio.dump(obj, path)
+    old = load_model(path)
+    np.testing.assert_array_equal(old.predict(facades[1]), m.predict(facades[1]))
+    with pytest.raises(LidarfxError, match="for classifier 'nb'"):
+        TrainConfig(**{**m.meta["config"], "n_estimators": 50})
 
 
 class Evil:
@@ -706,6 +721,11 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops", "--picture", "{d}/no/map.png"],
          "folder does not exist"),
         (["evaluate", "{a}", "--cv", "1"], "at least 2 folds"),
+        # options the configuration would ignore are refused
+        (["train", "{a}", "--model", "{d}/x.skops", "--classifier", "nb", "--n-estimators", "50"],
+         "got 50 for classifier 'nb'"),
+        (["train", "{a}", "--model", "{d}/x.skops", "--features", "eigen", "-r", "0.5", "-k", "10"],
+         "is for the 'knn' neighbourhood"),
         # a trained model brings its own classes, features and settings: training options are refused, not ignored
         (["evaluate", "{a}", "--model", "{d}/none.skops", "--classes", "2,6", "--importance"],
          "it does not take --classes, --importance"),

@@ -366,6 +366,8 @@ def test_feature_names_and_errors():
         compute_features(cloud, "eigen")
     with pytest.raises(LidarfxError, match="k >= 1"):
         compute_features(cloud, "eigen", neighbourhood="knn")
+    with pytest.raises(LidarfxError, match="is for the 'knn' neighbourhood, not 'sphere'"):
+        compute_features(cloud, "eigen", radius=0.5, k=10)  # a k that would be ignored is refused
     out = compute_features(cloud, "eigen,slope", radius=0.5)
     assert out.meta["features"] == [S.NAMES[s] for s in S.GROUPS["eigen"]] + ["slope"]
     assert all(out[n].dtype == np.float32 for n in out.meta["features"])

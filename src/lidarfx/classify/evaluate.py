@@ -660,7 +660,7 @@ def evaluate(
             t0 = time.perf_counter()
             imp: dict[str, Any] = {}
             s = balanced_sample(y, cfg.max_per_class, cfg.seed)
-            rf_cfg = TrainConfig(**{**cfg.to_dict(), "classifier": "rf"})
+            rf_cfg = TrainConfig(**{**cfg.to_dict(), "classifier": "rf", "n_estimators": None})  # 100 trees
             imp["impurity"] = impurity_importance(rf_cfg.fit_matrix(X[s], y[s]), names)
             imp["impurity_model"] = "random forest (100 trees) on the training sample"
             if fitted_blocks:

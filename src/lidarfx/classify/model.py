@@ -162,6 +162,9 @@ class TrainConfig:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
         make_classifier(self.classifier)  # validates the kind
         self.classifier = str(self.classifier).lower()
+        if self.n_estimators is not None and (self.classifier == "nb" or int(self.n_estimators) < 1):
+            raise LidarfxError("n_estimators is the number of trees (rf) or boosting iterations (hgb), at least 1; "
+                               f"got {self.n_estimators} for classifier {self.classifier!r}")
         feature_list(self.features, self.radii, self.neighbourhood, self.k)  # validates
 
     def feature_params(self) -> dict[str, Any]:
@@ -726,7 +729,13 @@ def load_model(path: str | os.PathLike) -> ClassifierModel:
         warnings.warn(f"{p} was written with scikit-learn {obj.get('sklearn_version')}, this is "
                       f"{_sklearn_version()}", LidarfxWarning, stacklevel=2)
     try:
-        config = TrainConfig(**meta["config"])
+        stored = dict(meta["config"])
+        # settings the configuration ignored before it refused them (a k without kNN, trees for naive Bayes)
+        if stored.get("neighbourhood", "sphere") != "knn":
+            stored["k"] = None
+        if stored.get("classifier") == "nb":
+            stored["n_estimators"] = None
+        config = TrainConfig(**stored)
         names = config.feature_names()
         classes = ClassMap.from_dict(meta["classes"])
     except (KeyError, TypeError) as exc:

@@ -93,6 +93,8 @@ def check_options(req, rs, neighbourhood="sphere", k=None, convention="default",
         raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
     if convention not in CONVENTIONS:
         raise LidarfxError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+    if k is not None and neighbourhood != "knn":
+        raise LidarfxError(f"k (the number of neighbours) is for the 'knn' neighbourhood, not {neighbourhood!r}")
     if not req.slots:
         return
     if neighbourhood == "knn":
