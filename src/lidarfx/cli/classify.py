@@ -215,6 +215,7 @@ def register(sub) -> None:
     g = _add_train_options(e)
     _add_common(e)
     # what --model cannot use: the options that configure a training or a cross-validation
+    # (g._group_actions: argparse's list of the "model" group's options)
     applies = {"precomputed", "min_building_area", "max_multi_return_share"}
     fixed = [a for a in g._group_actions if a.dest not in applies] + [
         a for a in e._actions if a.dest in ("spatial_blocks", "buffer", "no_random_folds", "importance",
@@ -323,10 +324,11 @@ def run_predict(args) -> int:
     if Path(args.output).suffix.lower() in (".las", ".laz"):
         from ..io.las import format_for_classes
 
-        pf = format_for_classes(cloud.header, max(int(c) for c in model.classes.codes))
+        top = max(int(c) for c in model.classes.codes)
+        pf = format_for_classes(cloud.header, top)
         if pf is not None:  # decided before the work, not found out when writing
             opts["point_format"] = pf
-            say(f"note: the model's class codes go up to {max(model.classes.codes)}, which LAS point format "
+            say(f"note: the model's class codes go up to {top}, which LAS point format "
                 f"{cloud.header.point_format.id} cannot store (0-31); writing LAS 1.4 point format {pf}")
     out = model.classify(cloud, confidence=args.confidence, probabilities=args.probabilities,
                          progress=False if args.quiet else None)
