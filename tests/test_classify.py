@@ -422,7 +422,8 @@ def test_model_roundtrip_identical_predictions(tmp_path, facades, rf_model):
 @pytest.mark.parametrize("kind", ["hgb", "nb"])
 def test_model_roundtrip_other_classifiers(tmp_path, facades, kind):
     a, b = facades
-    m = train(a, classes="2,5,6", classifier=kind, n_estimators=30 if kind != "nb" else None, features="eigen", radii=[0.5], max_per_class=500)
+    m = train(a, classes="2,5,6", classifier=kind, n_estimators=30 if kind != "nb" else None, features="eigen",
+              radii=[0.5], max_per_class=500)
     loaded = load_model(m.save(tmp_path / f"{kind}.skops"))
     np.testing.assert_array_equal(loaded.predict(b), m.predict(b))
     # boosting predicts through the numba tree walker, with scikit-learn's exact answers
