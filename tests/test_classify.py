@@ -616,6 +616,35 @@ def test_importance_and_backward_elimination(facades):
     assert be["best"]["mean_f1"] >= max(s["mean_f1"] for s in be["steps"]) - be["tolerance"]
 
 
+@pytest.mark.parametrize("degrees", [5.0, 25.0, 40.0])
+def test_terrain_slope_of_tilted_ground(degrees):
+    from lidarfx.classify.evaluate import terrain_slope
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 80, (20_000, 2))
+    z = np.tan(np.radians(degrees)) * xy[:, 0] + rng.normal(0, 0.02, len(xy))
+    s = terrain_slope(lidarfx.PointCloud(np.c_[xy, z]))
+    inner = ((xy > 5) & (xy < 75)).all(axis=1)
+    assert abs(np.median(s[inner]) - degrees) < 0.3
+    assert np.all(np.abs(np.percentile(s[inner], [5, 95]) - degrees) < 1.5)
+    assert terrain_slope(lidarfx.PointCloud(np.zeros((0, 3)))).shape == (0,)
+
+
+def test_slope_confusions_bins():
+    from lidarfx.classify.evaluate import SLOPE_BINS, slope_confusions
+
+    y = np.array([0, 0, 1, 1, 0, -1, 0, 1])
+    pred = np.array([0, 1, 1, 1, 0, 0, 0, 0])
+    slope = np.array([0.0, 9.99, 10.0, 29.0, 45.0, 50.0, 90.0, np.nan], dtype=np.float32)
+    cms = slope_confusions(y, pred, slope, 2)
+    assert cms.shape == (len(SLOPE_BINS) - 1, 2, 2)
+    assert cms[0].tolist() == [[1, 1], [0, 0]]  # 0 and 9.99
+    assert cms[1].tolist() == [[0, 0], [0, 1]]  # 10 opens the second class
+    assert cms[2].tolist() == [[0, 0], [0, 1]]
+    assert cms[4].tolist() == [[2, 0], [0, 0]]  # 45 and 90 (the last class includes 90); unlabelled and NaN left out
+    assert cms.sum() == 6
+
+
 def test_importance_and_elimination_pictures(tmp_path):
     import matplotlib.image as mpimg
 
@@ -694,8 +723,16 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     assert up.header.point_format.id == 6 and up["classification"].max() > 31
     np.testing.assert_array_equal(up["classification"], pred["classification"])
     capsys.readouterr()
-    assert main(["classify", "evaluate", str(pb), "--model", str(model), "--out", str(d / "ev"), "--json", "-q"]) == 0
+    assert main(["classify", "evaluate", str(pb), "--model", str(model), "--out", str(d / "ev"), "--json", "-q",
+                 "--by-slope"]) == 0
     rep = json.loads(capsys.readouterr().out)
+    rows = rep["sections"]["test"]["files"][str(pb)]["by_slope"]
+    assert [r["slope_deg"] for r in rows] == [[0, 10], [10, 20], [20, 30], [30, 45], [45, 90]]
+    assert sum(r["points"] for r in rows) == rep["sections"]["test"]["metrics"]["points"]  # every point has a slope
+    assert rep["sections"]["test"]["metrics"]["by_slope"] == rows  # one file: pooled = the file
+    from lidarfx.classify import format_report
+
+    assert "by terrain slope" in format_report(rep)
     assert rep["sections"]["test"]["metrics"]["oa"] > 0.95
     assert (d / "ev" / "confusion_test.png").is_file()
     fb = rep["sections"]["test"]["files"][str(pb)]
@@ -722,6 +759,7 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops", "--picture", "{d}/no/map.png"],
          "folder does not exist"),
         (["evaluate", "{a}", "--cv", "1"], "at least 2 folds"),
+        (["evaluate", "{a}", "--by-slope"], "--by-slope breaks down the results on test files"),
         # options the configuration would ignore are refused
         (["train", "{a}", "--model", "{d}/x.skops", "--classifier", "nb", "--n-estimators", "50"],
          "got 50 for classifier 'nb'"),

@@ -25,6 +25,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .. import __version__
+from ..cloud import PointCloud
 from ..errors import LidarfxError, LidarfxWarning
 from .classes import ClassMap
 from .model import (
@@ -44,7 +45,7 @@ from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask",
            "file_buffer_mask", "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion",
-           "plot_importance", "plot_elimination"]
+           "plot_importance", "plot_elimination", "terrain_slope", "SLOPE_BINS"]
 
 LAYOUT = "rows = reference, columns = predicted"
 
@@ -447,11 +448,55 @@ def _out_dir(out_dir: str | os.PathLike, create: bool = True) -> Path:
     return d
 
 
+#: terrain-slope classes (degrees) of the accuracy breakdown of :func:`evaluate_model` (``by_slope``)
+SLOPE_BINS = (0.0, 10.0, 20.0, 30.0, 45.0, 90.0)
+
+
+def terrain_slope(cloud: PointCloud) -> np.ndarray:
+    """Slope of the terrain under every point (degrees, float32): the gradient of a 1 m DTM
+    (TIN of the SMRF ground points, :func:`lidarfx.ground.dtm`) in the point's cell.  The
+    filter never looks at the classification; NaN for every point when it finds no ground."""
+    from ..ground import classify_ground, dtm
+    from ..ground.grid import gradient_slope
+
+    n = len(cloud)
+    mask = classify_ground(cloud, ignore_classes=None, progress=False) if n else np.zeros(0, bool)
+    if not mask.any():
+        return np.full(n, np.nan, dtype=np.float32)
+    r = dtm(cloud, resolution=1.0 / unit_to_metre(cloud), ground=mask)  # 1 m cells whatever the unit
+    g = gradient_slope(np.asarray(r.array, dtype=np.float64), r.resolution)
+    x0, y0 = r.origin
+    col = np.clip(((cloud.x - x0) / r.resolution).astype(np.int64), 0, g.shape[1] - 1)
+    row = np.clip(((y0 - cloud.y) / r.resolution).astype(np.int64), 0, g.shape[0] - 1)
+    return np.degrees(np.arctan(g[row, col])).astype(np.float32)
+
+
+def slope_confusions(y: np.ndarray, pred: np.ndarray, slope: np.ndarray, k: int) -> np.ndarray:
+    """Confusion matrices of the labelled points (``y >= 0``) per class of :data:`SLOPE_BINS`
+    (``len(SLOPE_BINS) - 1`` × k × k; the last class includes 90°)."""
+    out = np.zeros((len(SLOPE_BINS) - 1, k, k), np.int64)
+    b = np.clip(np.searchsorted(SLOPE_BINS, slope, side="right") - 1, 0, len(SLOPE_BINS) - 2)
+    for i in range(len(SLOPE_BINS) - 1):
+        sel = (y >= 0) & (b == i) & np.isfinite(slope)
+        out[i] = confusion_matrix(y[sel], pred[sel], k)
+    return out
+
+
+def _slope_table(cms: np.ndarray, cmap: ClassMap) -> list[dict[str, Any]]:
+    rows = []
+    for i, cm in enumerate(cms):
+        m = metrics(cm)
+        rows.append({"slope_deg": [SLOPE_BINS[i], SLOPE_BINS[i + 1]], "points": int(cm.sum()), "oa": m["oa"],
+                     "pa": {cmap.names[c]: m["classes"][c]["pa"] for c in range(len(cmap))},
+                     "confusion": cm.tolist()})
+    return rows
+
+
 def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | None = False,
                    log: Callable[[str], None] | None = None,
                    maps_dir: str | os.PathLike | None = None,
                    min_building_area: float | None = None,
-                   max_multi_return_share: float | None = None) -> dict[str, Any]:
+                   max_multi_return_share: float | None = None, by_slope: bool = False) -> dict[str, Any]:
     """Metrics of a trained model on labelled clouds: per file and pooled.
 
     Every usable point is classified (features use all of them as neighbours);
@@ -460,13 +505,16 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     is written there (:func:`lidarfx.render.error_map`; its path in the file's
     ``error_map``, the points of its error pairs in ``error_pairs``).
     ``min_building_area``, ``max_multi_return_share``: override the model's building-cluster
-    rule (:meth:`ClassifierModel.predict`).
+    rule (:meth:`ClassifierModel.predict`).  ``by_slope``: also OA and PA per class of
+    terrain slope (:data:`SLOPE_BINS`, slope from :func:`terrain_slope`), per file and pooled,
+    in ``by_slope``.
     """
     maps = _out_dir(maps_dir, create=False) if maps_dir is not None else None  # refused before any work
     srcs = read_sources(sources, progress=progress)
     cmap = model.classes
     k = len(cmap)
     total = np.zeros((k, k), np.int64)
+    total_slope = np.zeros((len(SLOPE_BINS) - 1, k, k), np.int64)
     files = {}
     t0 = time.perf_counter()
     for s in srcs:
@@ -493,6 +541,10 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         m["ignored_points"] = int((y < 0).sum())
         m["unusable_points"] = int(s.n_total - len(s.cloud))
         m["density"] = dens
+        if by_slope:
+            cms = slope_confusions(y, pred, terrain_slope(s.cloud), k)
+            total_slope += cms
+            m["by_slope"] = _slope_table(cms, cmap)
         if rule:
             m["small_buildings"] = {
                 "min_building_area": model.min_building_area if min_building_area is None else float(min_building_area),
@@ -515,6 +567,8 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     if not files:
         raise LidarfxError(f"none of the files has points of the model's classes ({cmap.spec()})")
     pooled = _metrics_for(total, cmap)
+    if by_slope:
+        pooled["by_slope"] = _slope_table(total_slope, cmap)
     return {"title": "trained model on test files", "files": files, "metrics": pooled,
             "seconds": round(time.perf_counter() - t0, 3)}
 
@@ -537,6 +591,7 @@ def evaluate(
     progress: bool | None = False,
     log: Callable[[str], None] | None = None,
     maps_dir: str | os.PathLike | None = None,
+    by_slope: bool = False,
     **params: Any,
 ) -> dict[str, Any]:
     """Evaluate a classifier configuration on labelled clouds; returns a report dict.
@@ -557,8 +612,8 @@ def evaluate(
     shares a point with a held-out point's; 0 for k-NN neighbourhoods, which have
     no fixed size; ``0`` = no buffer).
     * ``test`` — train on all ``sources``, test on the ``test`` files (per file
-      and pooled; with ``maps_dir`` an error map per test file, see
-      :func:`evaluate_model`).
+      and pooled; with ``maps_dir`` an error map per test file, with ``by_slope``
+      the accuracy per terrain-slope class, see :func:`evaluate_model`).
 
     ``importance`` adds impurity importance (a random forest on the training
     sample) and permutation importance (held-out block fold 0); ``eliminate``
@@ -685,7 +740,7 @@ def evaluate(
         say("train on all training files:")
         model = train(srcs, classes=cmap, config=cfg, progress=progress, log=lambda m: say("  " + m))
         say("test:")
-        sec = evaluate_model(model, test, progress=progress, log=say, maps_dir=maps_dir)
+        sec = evaluate_model(model, test, progress=progress, log=say, maps_dir=maps_dir, by_slope=by_slope)
         sec["title"] = "train on the training files, test on the test files"
         sec["train_seconds"] = model.meta["training"]["seconds"]
         sec["seconds"] = round(time.perf_counter() - t0, 3)
@@ -717,6 +772,19 @@ def format_metrics(m: dict[str, Any], title: str | None = None) -> str:
     for c, row in zip(m["classes"], m["confusion"]):
         lines.append(f"  {c['name']:<{w}}" + "".join(f"{v:>{cw},}" for v in row))
     return "\n".join(lines)
+
+
+def format_slope_table(rows: list[dict[str, Any]]) -> str:
+    """Text table of a ``by_slope`` breakdown: points, OA and PA per class per slope class."""
+    names = list(rows[0]["pa"]) if rows else []
+    w = max([len(n) for n in names] + [7])
+    out = ["  by terrain slope (1 m DTM of the SMRF ground):",
+           f"  {'slope':>9} {'points':>9} {'OA':>7}" + "".join(f" {'PA ' + n:>{w + 3}}" for n in names)]
+    for r in rows:
+        lo, hi = r["slope_deg"]
+        out.append(f"  {f'{lo:g}–{hi:g}°':>9} {r['points']:>9,} {_f(r['oa']):>7}"
+                   + "".join(f" {_f(r['pa'][n]):>{w + 3}}" for n in names))
+    return "\n".join(out)
 
 
 def _small_buildings_line(sb: dict[str, Any]) -> str:
@@ -761,7 +829,11 @@ def format_report(report: dict[str, Any]) -> str:
                 out.append(format_metrics(m, f"-- {Path(name).name}{dens}"))
                 if m.get("small_buildings"):
                     out.append(_small_buildings_line(m["small_buildings"]))
+                if m.get("by_slope"):
+                    out.append(format_slope_table(m["by_slope"]))
             out.append(format_metrics(sec["metrics"], "-- all test files pooled"))
+            if sec["metrics"].get("by_slope") and len(sec["files"]) > 1:
+                out.append(format_slope_table(sec["metrics"]["by_slope"]))
         else:
             out.append(format_metrics(sec["metrics"]))
         out.append("")

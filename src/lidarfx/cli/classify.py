@@ -208,6 +208,9 @@ def register(sub) -> None:
     e.add_argument("--importance", action="store_true", help="impurity and permutation feature importance")
     e.add_argument("--backward-elimination", action="store_true",
                    help="Chehata-style backward feature elimination with a random forest (slow)")
+    e.add_argument("--by-slope", action="store_true",
+                   help="with --model or --test: also OA and PA per class in terrain-slope classes "
+                        "(0-10, 10-20, 20-30, 30-45, 45-90 degrees; slope of a 1 m DTM of the SMRF ground)")
     e.add_argument("-o", "--out", default=None, metavar="DIR",
                    help="write report.txt, report.json and confusion_*.png to DIR; with --model or --test "
                         "also a plan-view error map errors_<file>.png per test file; importance.png and "
@@ -445,7 +448,7 @@ def run_evaluate(args) -> int:
         if args.precomputed:
             model.features.precomputed = True
         _rule_overrides(model, args)
-        sec = evaluate_model(model, args.files, log=say, maps_dir=args.out)
+        sec = evaluate_model(model, args.files, log=say, maps_dir=args.out, by_slope=args.by_slope)
         report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
                   "config": model.meta["config"], "features": model.feature_names,
                   "classes": model.classes.to_dict(), "class_spec": model.classes.spec(),
@@ -455,6 +458,8 @@ def run_evaluate(args) -> int:
         cv = args.cv
         if cv is None and not args.test and not args.leave_one_out:
             cv = 3
+        if args.by_slope and not args.test:
+            raise LidarfxError("--by-slope breaks down the results on test files: give --test FILES or --model")
         if cv is not None and cv < 2:
             raise LidarfxError("--cv needs at least 2 folds")
         if args.spatial_blocks < 0:
@@ -465,6 +470,7 @@ def run_evaluate(args) -> int:
             random_cv=not args.no_random_folds, leave_one_out=args.leave_one_out, classes=args.classes,
             ignore=_ignore(args), config=_config(args), importance=args.importance,
             eliminate=args.backward_elimination, log=say, maps_dir=args.out if args.test else None,
+            by_slope=args.by_slope,
         )
     if args.out:
         written = write_report(report, args.out)
