@@ -630,6 +630,11 @@ def test_terrain_slope_of_tilted_ground(degrees):
     assert terrain_slope(lidarfx.PointCloud(np.zeros((0, 3)))).shape == (0,)
 
 
+def test_by_slope_needs_test_files(facades):
+    with pytest.raises(LidarfxError, match="by_slope breaks down the results on test files"):
+        evaluate([facades[0]], classes=FACADE6, cv=3, by_slope=True, **SMALL)
+
+
 def test_slope_confusions_bins():
     from lidarfx.classify.evaluate import SLOPE_BINS, slope_confusions
 

@@ -631,6 +631,8 @@ def evaluate(
     buf = default_buffer(cfg) if buffer is None else float(buffer)
     if not (buf >= 0 and math.isfinite(buf)):
         raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")
+    if by_slope and test is None:
+        raise LidarfxError("by_slope breaks down the results on test files: give test files (or use evaluate_model)")
     t_all = time.perf_counter()
     srcs = read_sources(sources, progress=progress)
     cmap = resolve_classes(srcs, classes, ignore)
