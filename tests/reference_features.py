@@ -106,7 +106,9 @@ def features(xyz, p, r, kind="sphere", dmax=0.10, bins=10, height=np.inf):
         v2 = np.cross(nrm, v1)
         uu, ww, hh = d @ v1, d @ v2, d @ nrm
         A = np.c_[np.ones(n), uu, ww, uu**2, uu * ww, ww**2]
-        a, b, cc, dd, ee, ff = np.linalg.lstsq(A, hh, rcond=None)[0]
+        coef = np.linalg.lstsq(A, hh, rcond=None)[0]
+        a, b, cc, dd, ee, ff = coef
+        f["quadric_inlier_ratio"] = float((np.abs(hh - A @ coef) <= dmax).mean())
         g2 = 1 + b * b + cc * cc
         H = ((1 + cc * cc) * 2 * dd - 2 * b * cc * ee + (1 + b * b) * 2 * ff) / (2 * g2**1.5)
         K = (4 * dd * ff - ee * ee) / g2**2

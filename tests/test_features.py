@@ -146,6 +146,25 @@ def test_quadric_curvature_of_paraboloid_and_sphere():
     assert fs["k2"][0] == pytest.approx(-1 / R, abs=1e-3)
 
 
+def test_quadric_inlier_ratio_on_curved_surface_and_volume():
+    """A paraboloid lies on its quadric (ratio 1) where a plane keeps only part of it;
+    a random volume stays far from any surface; 5 neighbours give NaN."""
+    g = np.arange(-1.5, 1.5001, 0.03)
+    x, y = np.meshgrid(g, g)
+    x, y = x.ravel(), y.ravel()
+    par = np.c_[x, y, 0.5 * x**2 + 0.2 * y**2]
+    f = feature_arrays(par, ["plane_inlier_ratio", "quadric_inlier_ratio"], radius=1.0, query_xyz=np.zeros((1, 3)))
+    assert f["quadric_inlier_ratio"][0] == pytest.approx(1.0)
+    assert f["plane_inlier_ratio"][0] < 0.8
+    rng = np.random.default_rng(0)
+    vol = rng.uniform(-1, 1, (20000, 3))
+    fv = feature_arrays(vol, "quadric", radius=1.0, query_xyz=np.zeros((1, 3)))
+    # the slab |h| <= d_max = 0.1 of a unit ball holds 3/4 (0.2 - 0.002/3) = 0.1495 of it
+    assert fv["quadric_inlier_ratio"][0] == pytest.approx(0.1495, abs=0.015)
+    few = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0.01], [0.05, 0.02, 0.0]], float)
+    assert np.isnan(feature_arrays(few, "quadric", radius=0.5, query_xyz=np.zeros((1, 3)))["quadric_inlier_ratio"][0])
+
+
 def test_not_computable_is_nan():
     xyz = np.array([[0, 0, 0], [0.1, 0, 0], [5, 5, 5], [5.1, 5, 5], [5, 5.1, 5], [5, 5, 5.1], [5.05, 5.05, 5.0]], float)
     f = feature_arrays(xyz, ["eigen", "curvature", "n_neighbours"], radius=0.3)

@@ -15,6 +15,10 @@ the query point's footprint (u = w = 0):
 Signs follow the oriented normal (up, or towards the scanner): a bowl opening
 towards the normal (ditch, valley) has positive curvature, a ridge negative.
 Fewer than 6 neighbours or a singular fit (points on a line) give NaN.
+
+The same fit gives ``quadric_inlier_ratio``: the share of the neighbours whose
+distance from the quadric along the normal is at most ``d_max`` — the
+counterpart of ``plane_inlier_ratio`` for a curved or bumpy surface.
 """
 from __future__ import annotations
 
@@ -68,10 +72,9 @@ def solve_sym6(qa, work):
 
 
 @nb.njit(cache=True)
-def quadric_curvatures(qa, radius, work, col, out):
-    """Fit the quadric from packed normal equations and write k1, k2, mean, Gaussian."""
-    if not solve_sym6(qa, work):
-        return
+def quadric_curvatures(work, radius, col, out):
+    """k1, k2, mean and Gaussian curvature from the solved quadric in ``work[36:42]``
+    (:func:`solve_sym6` of the normal equations in coordinates divided by ``radius``)."""
     b = work[37]
     c = work[38]
     # undo the 1/r scaling of coordinates: second-order terms scale by 1/r
@@ -86,3 +89,9 @@ def quadric_curvatures(qa, radius, work, col, out):
     S.put(out, col, S.K2, hm - disc)
     S.put(out, col, S.MEAN_CURVATURE, hm)
     S.put(out, col, S.GAUSS_CURVATURE, kg)
+
+
+@nb.njit(cache=True, inline="always")
+def quadric_residual(work, u, w, h):
+    """h − quadric(u, w) for the solved quadric in ``work[36:42]`` (scaled coordinates)."""
+    return h - (work[36] + work[37] * u + work[38] * w + work[39] * u * u + work[40] * u * w + work[41] * w * w)

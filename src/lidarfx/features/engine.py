@@ -37,7 +37,7 @@ import numpy as np
 
 from ..neighbors import G_DX, G_DY, G_DZ, column_ranges, gather
 from . import slots as S
-from .curvature import quadric_curvatures
+from .curvature import quadric_curvatures, quadric_residual, solve_sym6
 from .eigen import eigen_features, eigh3
 from .histogram import histogram_features
 from .plane import orient_normal, write_plane
@@ -145,6 +145,30 @@ def _count_plane(buf, cnt, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax
     acc[_ECHO] = echo
 
 
+@nb.njit(cache=True)
+def _count_quadric(buf, cnt, r2, height, cylinder, v1, v2, nx_, ny_, nz_, r, dmax, work):
+    """Neighbours within dmax (along the normal) of the solved local quadric (work[36:42],
+    coordinates in the frame v1, v2, n divided by r, as accumulated in pass 2)."""
+    inl = 0.0
+    lim = dmax / r
+    for j in range(cnt):
+        dx = buf[_BX, j]
+        dy = buf[_BY, j]
+        dz = buf[_BZ, j]
+        h2 = dx * dx + dy * dy
+        if cylinder:
+            if h2 > r2 or abs(dz) > height:
+                continue
+        elif h2 + dz * dz > r2:
+            continue
+        uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
+        ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
+        hh = (dx * nx_ + dy * ny_ + dz * nz_) / r
+        if abs(quadric_residual(work, uu, ww, hh)) <= lim:
+            inl += 1.0
+    return inl
+
+
 @nb.njit(cache=True, parallel=True)
 def point_features(
     pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
@@ -170,18 +194,20 @@ def point_features(
     per_point = rad.shape[0] > 1
     cyl_kind = kind == KIND_CYLINDER
     want_curv = S.any_requested(col, S.K1, S.GAUSS_CURVATURE)
+    want_qinl = col[S.QUADRIC_INLIER_RATIO] >= 0
+    want_quad = want_curv or want_qinl  # the quadric fit is needed
     want_hist = S.any_requested(col, S.DH_PEAKS, S.DH_MAX_BIN)
     want_dist = S.any_requested(col, S.OCTANT_OCCUPANCY, S.Z_ASYMMETRY)
     want_plane_counts = col[S.PLANE_INLIER_RATIO] >= 0 or col[S.ECHO_RATIO_SLOPE] >= 0
     # what the closed-form eigen solve is needed for (nothing else pays for it)
     want_eigen = S.any_requested(col, S.EIGENVALUE1, S.WESTIN_SPHERICAL)
     want_slope = col[S.SLOPE] >= 0 or col[S.ASPECT] >= 0 or col[S.ECHO_RATIO_SLOPE] >= 0
-    need_v1 = want_curv or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
+    need_v1 = want_quad or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
     need_solve = (
         want_eigen
         or S.any_requested(col, S.NORMAL_X, S.PLANE_INLIER_RATIO)
         or want_slope
-        or want_curv
+        or want_quad
         or S.any_requested(col, S.EIGENVECTOR1_X, S.EIGENVECTOR1_Z)
     )
     nfeat = out.shape[1]
@@ -322,7 +348,7 @@ def point_features(
                     S.put(o, col, S.PLANE_INLIER_RATIO, p2[_INL] / n)
                     if need_cyl and ncyl > 0.0:
                         S.put(o, col, S.ECHO_RATIO_SLOPE, 100.0 * p2[_ECHO] / ncyl)
-                if not (want_hist or want_dist or (want_curv and plane_ok)):
+                if not (want_hist or want_dist or (want_quad and plane_ok)):
                     continue
                 p2[:] = 0.0
                 quad[:] = 0.0
@@ -356,7 +382,7 @@ def point_features(
                             p2[_BLW] += 1.0
                         if d2 > 0.0:
                             octbits |= 1 << ((dx > 0.0) * 4 + (dy > 0.0) * 2 + (dz > 0.0))
-                    if want_curv and plane_ok:
+                    if want_quad and plane_ok:
                         uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
                         ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
                         hh = (dx * nxv + dy * nyv + dz * nzv) / r
@@ -370,8 +396,12 @@ def point_features(
                         octbits >>= 1
                     S.put(o, col, S.OCTANT_OCCUPANCY, occupied)
                     S.put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
-                if want_curv and plane_ok and n >= 6.0:
-                    quadric_curvatures(quad, r, work, col, o)
+                if want_quad and plane_ok and n >= 6.0 and solve_sym6(quad, work):
+                    if want_curv:
+                        quadric_curvatures(work, r, col, o)
+                    if want_qinl:
+                        inl = _count_quadric(buf, cnt, r2, height, cyl_kind, v1, v2, nxv, nyv, nzv, r, dmax, work)
+                        S.put(o, col, S.QUADRIC_INLIER_RATIO, inl / n)
         for s in range(nscale):
             for c in range(nfeat):
                 dst = out[s, c]

@@ -26,7 +26,8 @@ N_NEIGHBOURS = 50
 EIGENVECTOR1_X, EIGENVECTOR1_Y, EIGENVECTOR1_Z = 51, 52, 53
 MSAC_NORMAL_X, MSAC_NORMAL_Y, MSAC_NORMAL_Z, MSAC_SLOPE, MSAC_ASPECT = 54, 55, 56, 57, 58
 MSAC_PLANE_DISTANCE, MSAC_PLANE_STD, MSAC_INLIER_RATIO = 59, 60, 61
-NSLOTS = 62
+QUADRIC_INLIER_RATIO = 62
+NSLOTS = 63
 # fmt: on
 
 #: slot number -> feature name (the name users type and the attribute name written)
@@ -48,6 +49,7 @@ NAMES: tuple[str, ...] = (
     "eigenvector1_x", "eigenvector1_y", "eigenvector1_z",
     "msac_normal_x", "msac_normal_y", "msac_normal_z", "msac_slope", "msac_aspect",
     "msac_plane_distance", "msac_plane_std", "msac_inlier_ratio",
+    "quadric_inlier_ratio",
 )
 assert len(NAMES) == NSLOTS
 # plane.write_plane relies on these six consecutive slots
@@ -65,6 +67,7 @@ GROUPS: dict[str, tuple[int, ...]] = {
     "histogram": tuple(range(DH_PEAKS, DH_MAX_BIN + 1)),
     "distribution": (CENTROID_OFFSET, OCTANT_OCCUPANCY, Z_ASYMMETRY),
     "curvature": (K1, K2, MEAN_CURVATURE, GAUSS_CURVATURE),
+    "quadric": (QUADRIC_INLIER_RATIO,),
     "eigenvectors": (EIGENVECTOR1_X, EIGENVECTOR1_Y, EIGENVECTOR1_Z),
     "count": (N_NEIGHBOURS,),
 }
@@ -74,6 +77,7 @@ CYLINDER_SLOTS = frozenset(GROUPS["height"] + GROUPS["histogram"] + GROUPS["dens
 #: slots that need a second walk over the neighbours (after the local plane is known)
 PASS2_SLOTS = frozenset(
     (PLANE_INLIER_RATIO, ECHO_RATIO_SLOPE, OCTANT_OCCUPANCY, Z_ASYMMETRY) + GROUPS["histogram"] + GROUPS["curvature"]
+    + GROUPS["quadric"]
 )
 #: slots computed by the robust (MSAC) plane kernel
 MSAC_SLOTS = frozenset(GROUPS["msac"])
