@@ -826,6 +826,16 @@ def test_density_warning_api(facades, rf_model):
     assert old.density_check(sparse) is None  # models without a recorded density: no check
 
 
+def test_cli_density_warning_names_the_file_as_typed(facades, rf_model, tmp_path, monkeypatch, capsys):
+    sparse = facades[1].subset(np.random.default_rng(0).random(len(facades[1])) < 0.3)
+    lidarfx.write(sparse, tmp_path / "sparse.laz")
+    rf_model.save(tmp_path / "m.skops")
+    monkeypatch.chdir(tmp_path)
+    assert main(["classify", "predict", "sparse.laz", "out.laz", "--model", "m.skops", "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: sparse.laz: " in err and str(tmp_path) not in err
+
+
 def test_pulse_thinning_keeps_whole_pulses():
     from lidarfx.classify.pipeline import pulse_thinning_mask
 

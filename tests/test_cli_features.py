@@ -104,3 +104,14 @@ def test_features_cli_streams_into_every_format(scene_las, tmp_path, ext):
     ref = compute_features(lidarfx.read(scene_las), "planarity,slope", radius=0.4)
     for name in ("planarity", "slope"):
         np.testing.assert_allclose(got[name], ref[name], rtol=1e-6, equal_nan=True)
+
+
+def test_features_help_names_every_group():
+    import re
+
+    from lidarfx.cli.features import EPILOG
+    from lidarfx.features.registry import available
+
+    text = " ".join(EPILOG.split())
+    listed = set(re.findall(r"[a-z_]+", text[text.index("feature groups:"):]))
+    assert set(available()) <= listed, set(available()) - listed

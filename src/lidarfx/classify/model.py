@@ -275,7 +275,7 @@ def read_sources(sources: Any, progress: bool | None = False) -> list[Source]:
             out.append(s)
             continue
         if isinstance(s, PointCloud):
-            cloud, name = s, str(s.meta.get("source") or s.meta.get("name") or f"cloud {i + 1}")
+            cloud, name = s, str(s.meta.get("name") or s.meta.get("source") or f"cloud {i + 1}")
         else:
             cloud, name = io.read(s, progress=progress), str(s)
         mask = usable_mask(cloud)
@@ -404,7 +404,7 @@ class ClassifierModel:
     # ------------------------------------------------------------------ prediction
     def check(self, cloud: PointCloud, name: str | None = None) -> None:
         """Refuse a cloud the model cannot classify (no points, missing fields or precomputed features)."""
-        name = name or str(cloud.meta.get("source") or "the cloud")
+        name = name or str(cloud.meta.get("name") or cloud.meta.get("source") or "the cloud")
         if len(cloud) == 0:
             raise LidarfxError(f"{name} is empty: no points to classify")
         self.features.check_cloud(cloud, name)
@@ -433,7 +433,7 @@ class ClassifierModel:
         d = cloud_density(cloud if usable.all() else cloud.subset(usable))
         info = {"density": round(d, 2), "training_density": round(ref, 2), "ratio": round(d / ref, 3)}
         if warn and d < DENSITY_WARN_RATIO * ref:
-            label = name or str(cloud.meta.get("source") or cloud.meta.get("name") or "the cloud")
+            label = name or str(cloud.meta.get("name") or cloud.meta.get("source") or "the cloud")
             warnings.warn(
                 f"{label}: {d:.1f} points/m² is {d / ref:.0%} of the sparsest training file's {ref:.1f}; "
                 "the model's neighbourhoods were learned on denser data and accuracy falls with density "
@@ -596,7 +596,7 @@ class ClassifierModel:
         float32 ``confidence`` attribute (the probability of the class given) and, with
         ``probabilities``, one float32 attribute per class (:meth:`probability_names`: the
         classifier's probabilities, before the building rule; NaN where not predicted)."""
-        warn_unusable(cloud, usable_mask(cloud), str(cloud.meta.get("source") or cloud.meta.get("name") or "the cloud"))
+        warn_unusable(cloud, usable_mask(cloud), str(cloud.meta.get("name") or cloud.meta.get("source") or "the cloud"))
         dens = self.density_check(cloud)
         rule: dict[str, Any] = {}
         res = self.predict(cloud, progress=progress, return_confidence=confidence, check_density=False,

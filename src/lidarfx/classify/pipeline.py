@@ -146,7 +146,7 @@ class CloudSample:
 
     @property
     def name(self) -> str:
-        return str(self.cloud.meta.get("source") or self.cloud.meta.get("name") or "the cloud")
+        return str(self.cloud.meta.get("name") or self.cloud.meta.get("source") or "the cloud")
 
 
 def usable_mask(cloud: PointCloud) -> np.ndarray:

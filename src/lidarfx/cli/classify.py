@@ -320,6 +320,7 @@ def run_predict(args) -> int:
     if args.ground:
         model.features.ground = args.ground
     cloud = io.read(args.input, progress=False if args.quiet else None)
+    cloud.meta["name"] = args.input  # messages name the file as the user typed it
     model.check(cloud, args.input)
     t1 = time.perf_counter()
     _rule_overrides(model, args)

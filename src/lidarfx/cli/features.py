@@ -16,7 +16,8 @@ EPILOG = """examples:
   lidarfx features --list                                                  # groups and names
 
 feature groups: eigen, westin, plane, msac, density, height, histogram,
-distribution, curvature, eigenvectors, count, echo, all — or single names
+distribution, curvature, quadric, eigenvectors, count, echo, ground
+(height above the SMRF ground), all (without ground) — or single names
 (slope, planarity, ...).  Features are written as float32 extra-bytes
 dimensions (LAS/LAZ) or attributes (PLY, text, npz); NaN = not computable.
 """
