@@ -31,7 +31,7 @@ from . import slots as S
 
 @nb.njit(cache=True)
 def solve_sym6(qa, work):
-    """Solve the 6×6 normal equations packed in ``qa`` (see ``accumulate_quadric``).
+    """Solve the 6×6 normal equations packed in ``qa`` (see ``engine._sum_quadric``).
 
     Cholesky on the packed upper triangle; the solution goes to work[36:42].
     Returns False when the system is (numerically) singular.
@@ -89,9 +89,3 @@ def quadric_curvatures(work, radius, col, out):
     S.put(out, col, S.K2, hm - disc)
     S.put(out, col, S.MEAN_CURVATURE, hm)
     S.put(out, col, S.GAUSS_CURVATURE, kg)
-
-
-@nb.njit(cache=True, inline="always")
-def quadric_residual(work, u, w, h):
-    """h − quadric(u, w) for the solved quadric in ``work[36:42]`` (scaled coordinates)."""
-    return h - (work[36] + work[37] * u + work[38] * w + work[39] * u * u + work[40] * u * w + work[41] * w * w)

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..neighbors import G_DX, G_DY, G_DZ, column_ranges, gather
 from . import slots as S
-from .curvature import quadric_curvatures, quadric_residual, solve_sym6
+from .curvature import quadric_curvatures, solve_sym6
 from .eigen import eigen_features, eigh3
 from .histogram import histogram_features
 from .plane import orient_normal, write_plane
@@ -61,6 +61,16 @@ _INL, _ECHO, _ABV, _BLW, _CABV, _CBLW = range(6)
 _BX, _BY, _BZ = G_DX, G_DY, G_DZ
 
 
+@nb.njit(cache=True, inline="always")
+def _member(dx, dy, dz, r2, height, cylinder):
+    """1.0 if the offset (dx, dy, dz) lies in the sphere of squared radius r2, or with
+    ``cylinder`` in the vertical cylinder of that radius and half-height ``height``; else 0.0."""
+    h2 = dx * dx + dy * dy
+    if cylinder:
+        return 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
+    return 1.0 if h2 + dz * dz <= r2 else 0.0
+
+
 @nb.njit(cache=True, fastmath=_FAST)
 def _sum_cov(buf, cnt, r2, height, cylinder, acc):
     """Covariance sums over the sphere (or cylinder) of squared radius r2."""
@@ -69,11 +79,7 @@ def _sum_cov(buf, cnt, r2, height, cylinder, acc):
         dx = buf[_BX, j]
         dy = buf[_BY, j]
         dz = buf[_BZ, j]
-        h2 = dx * dx + dy * dy
-        if cylinder:
-            w = 1.0 if (h2 <= r2 and abs(dz) <= height) else 0.0
-        else:
-            w = 1.0 if h2 + dz * dz <= r2 else 0.0
+        w = _member(dx, dy, dz, r2, height, cylinder)
         n += w
         sx += w * dx
         sy += w * dy
@@ -145,27 +151,101 @@ def _count_plane(buf, cnt, r2, height, cylinder, cx, cy, cz, nx_, ny_, nz_, dmax
     acc[_ECHO] = echo
 
 
-@nb.njit(cache=True)
-def _count_quadric(buf, cnt, r2, height, cylinder, v1, v2, nx_, ny_, nz_, r, dmax, work):
-    """Neighbours within dmax (along the normal) of the solved local quadric (work[36:42],
-    coordinates in the frame v1, v2, n divided by r, as accumulated in pass 2)."""
-    inl = 0.0
-    lim = dmax / r
+@nb.njit(cache=True, fastmath=_FAST)
+def _sum_quadric(buf, cnt, r2, height, cylinder, v1, v2, nx_, ny_, nz_, r, qa):
+    """Normal equations of the local quadric h = a + b u + c w + d u² + e u w + f w² over the
+    sphere (or cylinder) of squared radius r2, in the frame v1, v2, n with coordinates divided
+    by r: ``qa[0:21]`` the upper triangle of AᵀA row by row, ``qa[21:27]`` Aᵀh.
+
+    AᵀA holds only the 15 moments of u, w up to order 4, so they are summed once each, in a
+    branch-free loop that LLVM vectorises.
+    """
+    inv_r = 1.0 / r
+    n = m_u = m_w = m_uu = m_uw = m_ww = 0.0
+    m_uuu = m_uuw = m_uww = m_www = 0.0
+    m_uuuu = m_uuuw = m_uuww = m_uwww = m_wwww = 0.0
+    s_h = s_uh = s_wh = s_uuh = s_uwh = s_wwh = 0.0
     for j in range(cnt):
         dx = buf[_BX, j]
         dy = buf[_BY, j]
         dz = buf[_BZ, j]
-        h2 = dx * dx + dy * dy
-        if cylinder:
-            if h2 > r2 or abs(dz) > height:
-                continue
-        elif h2 + dz * dz > r2:
-            continue
-        uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
-        ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
-        hh = (dx * nx_ + dy * ny_ + dz * nz_) / r
-        if abs(quadric_residual(work, uu, ww, hh)) <= lim:
-            inl += 1.0
+        k = _member(dx, dy, dz, r2, height, cylinder)
+        kr = k * inv_r  # a point outside the neighbourhood gets u = w = h = 0 and adds nothing
+        u = (dx * v1[0] + dy * v1[1] + dz * v1[2]) * kr
+        w = (dx * v2[0] + dy * v2[1] + dz * v2[2]) * kr
+        h = (dx * nx_ + dy * ny_ + dz * nz_) * kr
+        uu = u * u
+        uw = u * w
+        ww = w * w
+        n += k
+        m_u += u
+        m_w += w
+        m_uu += uu
+        m_uw += uw
+        m_ww += ww
+        m_uuu += uu * u
+        m_uuw += uu * w
+        m_uww += u * ww
+        m_www += ww * w
+        m_uuuu += uu * uu
+        m_uuuw += uu * uw
+        m_uuww += uu * ww
+        m_uwww += uw * ww
+        m_wwww += ww * ww
+        s_h += h
+        s_uh += u * h
+        s_wh += w * h
+        s_uuh += uu * h
+        s_uwh += uw * h
+        s_wwh += ww * h
+    # basis (1, u, w, u², uw, w²): entry (r, c) of AᵀA is the moment of basis_r · basis_c
+    qa[0] = n
+    qa[1] = m_u
+    qa[2] = m_w
+    qa[3] = m_uu
+    qa[4] = m_uw
+    qa[5] = m_ww
+    qa[6] = m_uu
+    qa[7] = m_uw
+    qa[8] = m_uuu
+    qa[9] = m_uuw
+    qa[10] = m_uww
+    qa[11] = m_ww
+    qa[12] = m_uuw
+    qa[13] = m_uww
+    qa[14] = m_www
+    qa[15] = m_uuuu
+    qa[16] = m_uuuw
+    qa[17] = m_uuww
+    qa[18] = m_uuww
+    qa[19] = m_uwww
+    qa[20] = m_wwww
+    qa[21] = s_h
+    qa[22] = s_uh
+    qa[23] = s_wh
+    qa[24] = s_uuh
+    qa[25] = s_uwh
+    qa[26] = s_wwh
+
+
+@nb.njit(cache=True, fastmath=_FAST)
+def _count_quadric(buf, cnt, r2, height, cylinder, v1, v2, nx_, ny_, nz_, r, dmax, work):
+    """Neighbours within dmax (along the normal) of the solved local quadric (work[36:42],
+    coordinates in the frame v1, v2, n divided by r, as in :func:`_sum_quadric`)."""
+    inv_r = 1.0 / r
+    lim = dmax * inv_r
+    a, b, c, d, e, f = work[36], work[37], work[38], work[39], work[40], work[41]
+    inl = 0.0
+    for j in range(cnt):
+        dx = buf[_BX, j]
+        dy = buf[_BY, j]
+        dz = buf[_BZ, j]
+        k = _member(dx, dy, dz, r2, height, cylinder)
+        u = (dx * v1[0] + dy * v1[1] + dz * v1[2]) * inv_r
+        w = (dx * v2[0] + dy * v2[1] + dz * v2[2]) * inv_r
+        h = (dx * nx_ + dy * ny_ + dz * nz_) * inv_r
+        res = h - (a + b * u + c * w + d * u * u + e * u * w + f * w * w)
+        inl += k * (1.0 if abs(res) <= lim else 0.0)
     return inl
 
 
@@ -348,10 +428,18 @@ def point_features(
                     S.put(o, col, S.PLANE_INLIER_RATIO, p2[_INL] / n)
                     if need_cyl and ncyl > 0.0:
                         S.put(o, col, S.ECHO_RATIO_SLOPE, 100.0 * p2[_ECHO] / ncyl)
-                if not (want_hist or want_dist or (want_quad and plane_ok)):
+                want_fit = want_quad and plane_ok and n >= 6.0
+                if want_fit:
+                    _sum_quadric(buf, cnt, r2, height, cyl_kind, v1, v2, nxv, nyv, nzv, r, quad)
+                    if solve_sym6(quad, work):
+                        if want_curv:
+                            quadric_curvatures(work, r, col, o)
+                        if want_qinl:
+                            inl = _count_quadric(buf, cnt, r2, height, cyl_kind, v1, v2, nxv, nyv, nzv, r, dmax, work)
+                            S.put(o, col, S.QUADRIC_INLIER_RATIO, inl / n)
+                if not (want_hist or want_dist):
                     continue
                 p2[:] = 0.0
-                quad[:] = 0.0
                 hist[:] = 0.0
                 octbits = 0
                 amax = 0.0
@@ -382,11 +470,6 @@ def point_features(
                             p2[_BLW] += 1.0
                         if d2 > 0.0:
                             octbits |= 1 << ((dx > 0.0) * 4 + (dy > 0.0) * 2 + (dz > 0.0))
-                    if want_quad and plane_ok:
-                        uu = (dx * v1[0] + dy * v1[1] + dz * v1[2]) / r
-                        ww = (dx * v2[0] + dy * v2[1] + dz * v2[2]) / r
-                        hh = (dx * nxv + dy * nyv + dz * nzv) / r
-                        accumulate_quadric(quad, uu, ww, hh)
                 if want_hist and need_cyl and ncyl > 0.0:
                     histogram_features(hist, ncyl, p2[_CABV], p2[_CBLW], col, o)
                 if want_dist and n > 0.0:
@@ -396,30 +479,8 @@ def point_features(
                         octbits >>= 1
                     S.put(o, col, S.OCTANT_OCCUPANCY, occupied)
                     S.put(o, col, S.Z_ASYMMETRY, (p2[_ABV] - p2[_BLW]) / n)
-                if want_quad and plane_ok and n >= 6.0 and solve_sym6(quad, work):
-                    if want_curv:
-                        quadric_curvatures(work, r, col, o)
-                    if want_qinl:
-                        inl = _count_quadric(buf, cnt, r2, height, cyl_kind, v1, v2, nxv, nyv, nzv, r, dmax, work)
-                        S.put(o, col, S.QUADRIC_INLIER_RATIO, inl / n)
         for s in range(nscale):
             for c in range(nfeat):
                 dst = out[s, c]
                 for i in range(i0, i1):
                     dst[i] = tile[i - i0, s, c]
-
-
-@nb.njit(cache=True, inline="always")
-def accumulate_quadric(qa, u, w, h):
-    """Add one point to the normal equations of h = a + b u + c w + d u² + e u w + f w².
-
-    ``qa[0:21]`` holds the upper triangle of AᵀA row by row, ``qa[21:27]`` Aᵀh
-    """
-    basis = (1.0, u, w, u * u, u * w, w * w)
-    t = 0
-    for r in range(6):
-        br = basis[r]
-        for c in range(r, 6):
-            qa[t] += br * basis[c]
-            t += 1
-        qa[21 + r] += br * h
