@@ -66,6 +66,30 @@ def test_metrics_on_a_hand_computed_matrix():
     assert m["mean_iou"] == pytest.approx((50 / 65 + 35 / 50) / 2)
 
 
+def test_block_bootstrap_intervals():
+    from lidarfx.classify import block_bootstrap, block_ids
+
+    rng = np.random.default_rng(0)
+    blocks = np.repeat(np.arange(100), 100)  # 100 blocks of 100 points
+    ref = rng.integers(0, 2, blocks.size)
+    assert block_bootstrap(ref, ref, blocks, 2)["oa"] == [1.0, 1.0]  # perfect: no spread
+    # every point of half the blocks right, of the other half wrong: OA 0.5; the resampled
+    # share of right blocks has sd sqrt(0.25 / 100) = 0.05, so the 95 % interval is 0.5 ± 0.098,
+    # where resampling single points (10 000 of them) would give ± 0.0098
+    pred = np.where(blocks % 2 == 0, ref, 1 - ref)
+    ci = block_bootstrap(ref, pred, blocks, 2, n_boot=4000, seed=1)
+    assert ci["blocks"] == 100 and ci["level"] == 0.95
+    assert ci["oa"][0] == pytest.approx(0.402, abs=0.015) and ci["oa"][1] == pytest.approx(0.598, abs=0.015)
+    assert ci["mean_f1"][0] < 0.5 < ci["mean_f1"][1]
+    assert ci == block_bootstrap(ref, pred, blocks, 2, n_boot=4000, seed=1)  # seeded
+    unlabelled = np.where(blocks < 99, -1, ref)  # labelled points in one block only: no interval
+    assert block_bootstrap(unlabelled, pred, blocks, 2) is None
+    # block ids: the grid is aligned to multiples of the size, groups keep files apart
+    xy = np.array([[0.5, 0.5], [19.9, 0.1], [20.1, 0.1], [0.5, 0.5]])
+    b = block_ids(xy, 20.0, groups=np.array([0, 0, 0, 1]))
+    assert b[0] == b[1] and len({b[0], b[2], b[3]}) == 3
+
+
 def test_metrics_absent_class_and_layout():
     # class 2 never occurs in the reference but is predicted once: it does not enter the means
     cm = np.array([[8, 1, 1], [0, 10, 0], [0, 0, 0]])
@@ -738,6 +762,10 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     from lidarfx.classify import format_report
 
     assert "by terrain slope" in format_report(rep)
+    ci = rep["sections"]["test"]["metrics"]["ci"]  # the default 1000 block resamples, 20 m blocks
+    assert ci["resamples"] == 1000 and ci["block_size"] == 20.0 and ci["blocks"] >= 2
+    assert ci["oa"][0] <= rep["sections"]["test"]["metrics"]["oa"] <= ci["oa"][1]
+    assert "95% interval (bootstrap of" in format_report(rep)
     assert rep["sections"]["test"]["metrics"]["oa"] > 0.95
     assert (d / "ev" / "confusion_test.png").is_file()
     fb = rep["sections"]["test"]["files"][str(pb)]
@@ -747,9 +775,15 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     counts = list(fb["error_pairs"].values())
     assert counts == sorted(counts, reverse=True) and counts[0] == off.max()  # the largest off-diagonal cell first
     assert sum(counts) == off.sum() if (off > 0).sum() <= 8 else sum(counts) < off.sum()  # at most 8 pairs named
-    assert main(["classify", "evaluate", str(pa), "--cv", "2", "--spatial-blocks", "5", *CLI_MODEL]) == 0
+    assert main(["classify", "evaluate", str(pa), "--cv", "2", "--spatial-blocks", "5", *CLI_MODEL, "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    for key in ("cv_random", "cv_blocks"):  # every section has its block-bootstrap interval (5 m blocks)
+        m = rep["sections"][key]["metrics"]
+        assert m["ci"]["block_size"] == 5.0 and m["ci"]["oa"][0] <= m["oa"] <= m["ci"]["oa"][1]
+    assert main(["classify", "evaluate", str(pa), "--cv", "2", "--spatial-blocks", "5", *CLI_MODEL,
+                 "--bootstrap", "0"]) == 0
     txt = capsys.readouterr().out
-    assert "random folds" in txt and "spatial blocks of 5 m" in txt and "OA" in txt
+    assert "random folds" in txt and "spatial blocks of 5 m" in txt and "OA" in txt and "interval" not in txt
 
 
 @pytest.mark.parametrize(

@@ -18,8 +18,10 @@ from __future__ import annotations
 
 from .classes import ASPRS_NAMES, DEFAULT_IGNORE, ClassMap
 from .evaluate import (
+    block_bootstrap,
     block_buffer_mask,
     block_folds,
+    block_ids,
     confusion_matrix,
     evaluate,
     evaluate_model,
@@ -52,7 +54,7 @@ from .pipeline import (
 
 __all__ = [
     "ASPRS_NAMES", "DEFAULT_IGNORE", "ClassMap",
-    "block_buffer_mask", "block_folds", "confusion_matrix", "evaluate", "evaluate_model", "file_buffer_mask",
+    "block_bootstrap", "block_buffer_mask", "block_folds", "block_ids", "confusion_matrix", "evaluate", "evaluate_model", "file_buffer_mask",
     "format_report", "metrics",
     "plot_confusion", "plot_elimination", "plot_importance", "random_folds", "write_report",
     "backward_elimination", "impurity_importance", "permutation_importance",

@@ -43,7 +43,8 @@ from .fastpredict import predict as fast_predict
 from .objects import building_class
 from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
-__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_buffer_mask",
+__all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_ids", "block_bootstrap",
+           "block_buffer_mask",
            "file_buffer_mask", "cross_validate", "evaluate", "evaluate_model", "format_metrics", "format_report", "write_report", "plot_confusion",
            "plot_importance", "plot_elimination", "terrain_slope", "SLOPE_BINS"]
 
@@ -139,17 +140,10 @@ def block_folds(xy: np.ndarray, n_folds: int, block_size: float, seed: int = 0,
     with ``seed``, each block joins the fold holding the fewest points so far.
     No block is ever split between folds.
     """
-    xy = np.asarray(xy, dtype=np.float64)
     if n_folds < 2:
         raise LidarfxError("cross-validation needs at least 2 folds")
-    if not (block_size > 0 and math.isfinite(block_size)):
-        raise LidarfxError(f"block size must be a positive number of metres, got {block_size!r}")
-    bx = np.floor(xy[:, 0] / block_size).astype(np.int64)
-    by = np.floor(xy[:, 1] / block_size).astype(np.int64)
-    g = np.zeros(len(xy), np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
-    key = np.stack([g, bx, by], axis=1)
-    _, block, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    block = block.ravel()
+    block = block_ids(xy, block_size, groups)
+    counts = np.bincount(block)
     nb = len(counts)
     if nb < n_folds:
         raise LidarfxError(f"only {nb} spatial block(s) of {block_size:g} m for {n_folds} folds; "
@@ -162,6 +156,67 @@ def block_folds(xy: np.ndarray, n_folds: int, block_size: float, seed: int = 0,
         fold_of_block[b] = f
         load[f] += counts[b]
     return fold_of_block[block], block
+
+
+def block_ids(xy: np.ndarray, block_size: float, groups: np.ndarray | None = None) -> np.ndarray:
+    """Id (0..B−1) of the square block of ``block_size`` m each point lies in; the grid is
+    aligned to multiples of the size, and ``groups`` (e.g. a file id) keeps blocks apart."""
+    xy = np.asarray(xy, dtype=np.float64)
+    if not (block_size > 0 and math.isfinite(block_size)):
+        raise LidarfxError(f"block size must be a positive number of metres, got {block_size!r}")
+    bx = np.floor(xy[:, 0] / block_size).astype(np.int64)
+    by = np.floor(xy[:, 1] / block_size).astype(np.int64)
+    g = np.zeros(len(xy), np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
+    _, block = np.unique(np.stack([g, bx, by], axis=1), axis=0, return_inverse=True)
+    return block.ravel()
+
+
+def block_bootstrap(ref: np.ndarray, pred: np.ndarray, blocks: np.ndarray, n_classes: int, *,
+                    n_boot: int = 1000, level: float = 0.95, seed: int = 0,
+                    block_size: float | None = None) -> dict[str, Any] | None:
+    """Confidence intervals of OA, kappa and mean F1 by a spatial block bootstrap.
+
+    The labelled points (``ref`` ≥ 0, ``pred`` ≥ 0) are grouped by ``blocks``
+    (:func:`block_ids`); ``n_boot`` times, as many blocks as there are are drawn with
+    replacement and their confusion matrices summed.  The interval holds the central
+    ``level`` of the resampled values (percentiles).  Neighbouring points are correlated,
+    so whole blocks, not points, are resampled; the interval says how much the figure
+    depends on which parts of *these* files were tested, not how it would move on
+    another survey.  None when fewer than 2 blocks hold labelled points.
+    """
+    ref, pred, blocks = np.asarray(ref), np.asarray(pred), np.asarray(blocks)
+    ok = (ref >= 0) & (pred >= 0)
+    if not ok.any():
+        return None
+    _, b = np.unique(blocks[ok], return_inverse=True)
+    nb = int(b.max()) + 1
+    if nb < 2:
+        return None
+    k = n_classes
+    cms = np.bincount((b * k + ref[ok]) * k + pred[ok], minlength=nb * k * k).reshape(nb, k * k)
+    rng = np.random.default_rng(seed)
+    draws = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=int(n_boot))  # (n_boot, nb) block counts
+    tot = (draws @ cms).reshape(-1, k, k).astype(np.float64)
+    n = tot.sum(axis=(1, 2))
+    diag = np.einsum("bii->bi", tot)
+    rows, cols = tot.sum(axis=2), tot.sum(axis=1)
+    oa = diag.sum(axis=1) / n
+    pe = (rows * cols).sum(axis=1) / n**2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        kappa = np.where(1 - pe > 1e-15, (oa - pe) / (1 - pe), np.nan)
+        f1 = np.where(rows > 0, 2 * diag / (rows + cols), np.nan)  # classes absent from a resample: not counted
+    mean_f1 = np.nanmean(f1, axis=1)
+    q = [(1 - level) / 2 * 100, (1 + level) / 2 * 100]
+
+    def ci(v: np.ndarray) -> list[float]:
+        v = v[np.isfinite(v)]
+        return [float(x) for x in np.percentile(v, q)] if len(v) else [float("nan")] * 2
+
+    out = {"level": level, "method": "spatial block bootstrap (percentile)", "blocks": nb, "resamples": int(n_boot),
+           "oa": ci(oa), "kappa": ci(kappa), "mean_f1": ci(mean_f1)}
+    if block_size:
+        out["block_size"] = float(block_size)
+    return out
 
 
 def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buffer: float,
@@ -258,6 +313,7 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                    log: Callable[[str], None] | None = None, X_aug: Sequence[np.ndarray] = (),
                    exclude: np.ndarray | None = None,
                    post: Callable[[int, Any, np.ndarray], np.ndarray] | None = None,
+                   out_pred: np.ndarray | None = None,
                    ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
     """Train on all folds but one (balanced sample, as :func:`train` does), predict the
     held-out fold, for every fold.  ``X_aug``: features of the same points in
@@ -267,7 +323,8 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
     ``exclude``: ``(n_folds, n)`` bool, points left out of fold ``f``'s training part
     (:func:`block_buffer_mask`, :func:`file_buffer_mask`).  ``post(f, estimator, held_out)``,
     when given, replaces the plain prediction of the held-out points (class indices;
-    e.g. the object-size rule, :class:`HeldOutRule`).  Returns the summed confusion matrix,
+    e.g. the object-size rule, :class:`HeldOutRule`).  ``out_pred`` (length n), when given,
+    receives every held-out point's predicted class index.  Returns the summed confusion matrix,
     per-fold results and
     the fitted estimators with their held-out indices."""
     from .model import _aug_cap
@@ -295,6 +352,8 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
             Xf, yf = np.vstack([Xf, Xa[sa]]), np.concatenate([yf, y[sa]])
         est = config.fit_matrix(Xf, yf)
         pred = fast_predict(est, X[te]) if post is None else post(int(f), est, te)
+        if out_pred is not None:
+            out_pred[te] = pred
         c = confusion_matrix(y[te], pred, n_classes)
         cm += c
         m = metrics(c)
@@ -496,7 +555,8 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
                    log: Callable[[str], None] | None = None,
                    maps_dir: str | os.PathLike | None = None,
                    min_building_area: float | None = None,
-                   max_multi_return_share: float | None = None, by_slope: bool = False) -> dict[str, Any]:
+                   max_multi_return_share: float | None = None, by_slope: bool = False,
+                   bootstrap: int = 1000, ci_block_size: float = 20.0) -> dict[str, Any]:
     """Metrics of a trained model on labelled clouds: per file and pooled.
 
     Every usable point is classified (features use all of them as neighbours);
@@ -507,8 +567,11 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     ``min_building_area``, ``max_multi_return_share``: override the model's building-cluster
     rule (:meth:`ClassifierModel.predict`).  ``by_slope``: also OA and PA per class of
     terrain slope (:data:`SLOPE_BINS`, slope from :func:`terrain_slope`), per file and pooled,
-    in ``by_slope``.
+    in ``by_slope``.  ``bootstrap``: resamples of the 95 % confidence intervals of OA, kappa
+    and mean F1 in ``ci`` (:func:`block_bootstrap` over blocks of ``ci_block_size`` m; 0 = none).
     """
+    if bootstrap and not (ci_block_size > 0 and math.isfinite(ci_block_size)):
+        raise LidarfxError(f"block size must be a positive number of metres, got {ci_block_size!r}")
     maps = _out_dir(maps_dir, create=False) if maps_dir is not None else None  # refused before any work
     srcs = read_sources(sources, progress=progress)
     cmap = model.classes
@@ -516,6 +579,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     total = np.zeros((k, k), np.int64)
     total_slope = np.zeros((len(SLOPE_BINS) - 1, k, k), np.int64)
     files = {}
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per file: ref, pred, block ids (bootstrap)
     t0 = time.perf_counter()
     for s in srcs:
         t = time.perf_counter()
@@ -541,6 +605,10 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
         m["ignored_points"] = int((y < 0).sum())
         m["unusable_points"] = int(s.n_total - len(s.cloud))
         m["density"] = dens
+        if bootstrap:
+            blocks = block_ids(s.cloud.xyz[:, :2] * unit_to_metre(s.cloud), ci_block_size)
+            m["ci"] = block_bootstrap(y, pred, blocks, k, n_boot=bootstrap, block_size=ci_block_size)
+            parts.append((y, pred, blocks))
         if by_slope:
             cms = slope_confusions(y, pred, terrain_slope(s.cloud), k)
             total_slope += cms
@@ -567,6 +635,11 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     if not files:
         raise LidarfxError(f"none of the files has points of the model's classes ({cmap.spec()})")
     pooled = _metrics_for(total, cmap)
+    if bootstrap and parts:
+        off = np.cumsum([0] + [int(b.max()) + 1 for _, _, b in parts[:-1]])  # block ids unique across files
+        pooled["ci"] = block_bootstrap(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+                                       np.concatenate([p[2] + o for p, o in zip(parts, off)]), k,
+                                       n_boot=bootstrap, block_size=ci_block_size)
     if by_slope:
         pooled["by_slope"] = _slope_table(total_slope, cmap)
     return {"title": "trained model on test files", "files": files, "metrics": pooled,
@@ -592,6 +665,7 @@ def evaluate(
     log: Callable[[str], None] | None = None,
     maps_dir: str | os.PathLike | None = None,
     by_slope: bool = False,
+    bootstrap: int = 1000,
     **params: Any,
 ) -> dict[str, Any]:
     """Evaluate a classifier configuration on labelled clouds; returns a report dict.
@@ -620,6 +694,10 @@ def evaluate(
     runs :func:`~lidarfx.classify.backward_elimination` over the spatial-block
     folds (random folds when blocks are off).
 
+    Every section's metrics carry ``ci``: 95 % confidence intervals of OA, kappa and
+    mean F1 from ``bootstrap`` resamples of spatial blocks of ``block_size`` m (20 m
+    when block folds are off; :func:`block_bootstrap`; 0 = none).
+
     Features of every labelled point are computed once; each fold then trains
     on a class-balanced sample of its training part (``max_per_class``) exactly
     like :func:`train`, and predicts every labelled point of the held-out part.
@@ -631,6 +709,9 @@ def evaluate(
     buf = default_buffer(cfg) if buffer is None else float(buffer)
     if not (buf >= 0 and math.isfinite(buf)):
         raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")
+    if not (isinstance(bootstrap, (int, np.integer)) and bootstrap >= 0):
+        raise LidarfxError(f"bootstrap must be a whole number of resamples >= 0, got {bootstrap!r}")
+    ci_size = float(block_size) if block_size else 20.0
     if by_slope and test is None:
         raise LidarfxError("by_slope breaks down the results on test files: give test files (or use evaluate_model)")
     t_all = time.perf_counter()
@@ -696,14 +777,18 @@ def evaluate(
             if rule is not None:
                 rule.set_folds({"cv_random": "random", "cv_blocks": "blocks"}.get(key, "files"), folds,
                                int(cv or 0), cv_seed, float(block_size or 0))
+            held = np.full(len(y), -1, np.int64)
             cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug,
-                                                  exclude=near.get(key), post=rule)
+                                                  exclude=near.get(key), post=rule, out_pred=held)
             if key == "leave_one_file_out":
                 for pf in per_fold:
                     pf["file"] = srcs[pf["fold"]].name
             report["sections"][key] = {"title": title, **extra, "folds": per_fold,
                                        "metrics": _metrics_for(cm, cmap),
                                        "seconds": round(time.perf_counter() - t0, 3)}
+            if bootstrap:
+                report["sections"][key]["metrics"]["ci"] = block_bootstrap(
+                    y, held, block_ids(xy, ci_size, g), k, n_boot=bootstrap, block_size=ci_size)
             if rule is not None:
                 report["sections"][key]["small_buildings"] = {"min_building_area": cfg.min_building_area,
                                                               "max_multi_return_share": cfg.max_multi_return_share,
@@ -742,7 +827,8 @@ def evaluate(
         say("train on all training files:")
         model = train(srcs, classes=cmap, config=cfg, progress=progress, log=lambda m: say("  " + m))
         say("test:")
-        sec = evaluate_model(model, test, progress=progress, log=say, maps_dir=maps_dir, by_slope=by_slope)
+        sec = evaluate_model(model, test, progress=progress, log=say, maps_dir=maps_dir, by_slope=by_slope,
+                             bootstrap=bootstrap, ci_block_size=ci_size)
         sec["title"] = "train on the training files, test on the test files"
         sec["train_seconds"] = model.meta["training"]["seconds"]
         sec["seconds"] = round(time.perf_counter() - t0, 3)
@@ -763,6 +849,12 @@ def format_metrics(m: dict[str, Any], title: str | None = None) -> str:
         lines.append(title)
     lines.append(f"points {m['points']:,}   OA {_f(m['oa'])}   kappa {_f(m['kappa'])}   "
                  f"mean F1 {_f(m['mean_f1'])}   mean IoU {_f(m['mean_iou'])}")
+    ci = m.get("ci")
+    if ci:
+        size = f" of {ci['block_size']:g} m" if ci.get("block_size") else ""
+        lines.append(f"{ci['level']:.0%} interval (bootstrap of {ci['blocks']} blocks{size}): "
+                     f"OA {_f(ci['oa'][0])}–{_f(ci['oa'][1])}   kappa {_f(ci['kappa'][0])}–{_f(ci['kappa'][1])}   "
+                     f"mean F1 {_f(ci['mean_f1'][0])}–{_f(ci['mean_f1'][1])}")
     w = max([len(c["name"]) for c in m["classes"]] + [5])
     lines.append(f"  {'class':<{w}} {'codes':>8} {'support':>9} {'PA':>7} {'UA':>7} {'F1':>7} {'IoU':>7}")
     for c in m["classes"]:
