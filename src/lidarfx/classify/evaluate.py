@@ -219,6 +219,13 @@ def block_bootstrap(ref: np.ndarray, pred: np.ndarray, blocks: np.ndarray, n_cla
     return out
 
 
+def _check_bootstrap(bootstrap: Any, block_size: float) -> None:
+    if isinstance(bootstrap, bool) or not (isinstance(bootstrap, (int, np.integer)) and bootstrap >= 0):
+        raise LidarfxError(f"bootstrap must be a whole number of resamples >= 0 (0 = no intervals), got {bootstrap!r}")
+    if bootstrap and not (block_size > 0 and math.isfinite(block_size)):
+        raise LidarfxError(f"block size must be a positive number of metres, got {block_size!r}")
+
+
 def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buffer: float,
                       groups: np.ndarray | None = None) -> np.ndarray:
     """Points near another fold's blocks: ``near[f, i]`` is True when point ``i`` lies within
@@ -570,8 +577,7 @@ def evaluate_model(model: ClassifierModel, sources: Any, *, progress: bool | Non
     in ``by_slope``.  ``bootstrap``: resamples of the 95 % confidence intervals of OA, kappa
     and mean F1 in ``ci`` (:func:`block_bootstrap` over blocks of ``ci_block_size`` m; 0 = none).
     """
-    if bootstrap and not (ci_block_size > 0 and math.isfinite(ci_block_size)):
-        raise LidarfxError(f"block size must be a positive number of metres, got {ci_block_size!r}")
+    _check_bootstrap(bootstrap, ci_block_size)
     maps = _out_dir(maps_dir, create=False) if maps_dir is not None else None  # refused before any work
     srcs = read_sources(sources, progress=progress)
     cmap = model.classes
@@ -709,9 +715,8 @@ def evaluate(
     buf = default_buffer(cfg) if buffer is None else float(buffer)
     if not (buf >= 0 and math.isfinite(buf)):
         raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")
-    if not (isinstance(bootstrap, (int, np.integer)) and bootstrap >= 0):
-        raise LidarfxError(f"bootstrap must be a whole number of resamples >= 0, got {bootstrap!r}")
     ci_size = float(block_size) if block_size else 20.0
+    _check_bootstrap(bootstrap, ci_size)
     if by_slope and test is None:
         raise LidarfxError("by_slope breaks down the results on test files: give test files (or use evaluate_model)")
     t_all = time.perf_counter()

@@ -442,6 +442,10 @@ def run_evaluate(args) -> int:
     say = _log(args)
     if args.out:
         _out_dir(args.out, create=False)  # a file in the way fails before the work
+    if args.spatial_blocks < 0:
+        raise LidarfxError("--spatial-blocks must be >= 0 (0 = no block folds)")
+    if args.bootstrap < 0:
+        raise LidarfxError("--bootstrap must be >= 0 (0 = no intervals)")
     if args.model:
         given = [opt for dest, default, opt in args.not_with_model if getattr(args, dest) != default]
         if args.test or args.cv or args.leave_one_out or given:
@@ -453,10 +457,6 @@ def run_evaluate(args) -> int:
         if args.precomputed:
             model.features.precomputed = True
         _rule_overrides(model, args)
-        if args.bootstrap < 0:
-            raise LidarfxError("--bootstrap must be >= 0 (0 = no intervals)")
-        if args.spatial_blocks < 0:
-            raise LidarfxError("--spatial-blocks must be >= 0")
         sec = evaluate_model(model, args.files, log=say, maps_dir=args.out, by_slope=args.by_slope,
                              bootstrap=args.bootstrap, ci_block_size=args.spatial_blocks or 20.0)
         report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
@@ -472,10 +472,6 @@ def run_evaluate(args) -> int:
             raise LidarfxError("--by-slope breaks down the results on test files: give --test FILES or --model")
         if cv is not None and cv < 2:
             raise LidarfxError("--cv needs at least 2 folds")
-        if args.spatial_blocks < 0:
-            raise LidarfxError("--spatial-blocks must be >= 0 (0 = no block folds)")
-        if args.bootstrap < 0:
-            raise LidarfxError("--bootstrap must be >= 0 (0 = no intervals)")
         report = evaluate(
             args.files, test=args.test, cv=cv, block_size=args.spatial_blocks or None,
             buffer=args.buffer,
