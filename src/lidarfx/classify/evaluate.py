@@ -1027,7 +1027,10 @@ def plot_confusion(m: dict[str, Any], path: str | os.PathLike, title: str | None
     ax.set_xlabel("predicted (columns)")
     ax.set_ylabel("reference (rows)")
     head = (title + "\n") if title else ""
-    ax.set_title(f"{head}OA {_f(m['oa'])}  kappa {_f(m['kappa'])}  mean F1 {_f(m['mean_f1'])}", fontsize=9)
+    ci = m.get("ci")
+    tail = (f"\n{ci['level']:.0%} interval, {ci['blocks']} blocks: OA {_f(ci['oa'][0], 3)}–{_f(ci['oa'][1], 3)}  "
+            f"mean F1 {_f(ci['mean_f1'][0], 3)}–{_f(ci['mean_f1'][1], 3)}") if ci else ""
+    ax.set_title(f"{head}OA {_f(m['oa'])}  kappa {_f(m['kappa'])}  mean F1 {_f(m['mean_f1'])}{tail}", fontsize=9)
     fig.text(0.5, 0.01, f"layout: {LAYOUT}; cell = points and share of the reference row",
              ha="center", fontsize=7)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
