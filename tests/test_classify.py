@@ -1187,3 +1187,33 @@ def test_ign_default_pipeline_regression(ign_result):
 def test_ign_acceptance_target(ign_result):
     m = ign_result[0]["metrics"]
     assert m["oa"] >= 0.965 and m["mean_f1"] >= 0.95, m
+
+
+def test_default_list_with_inputs_left_out(facades, tmp_path, capsys):
+    from lidarfx.classify.pipeline import feature_list
+
+    full = feature_list(None, [1, 2, 3])[0]
+    assert feature_list("default", [1, 2, 3])[0] == full
+    left = feature_list("default,-return_ratio,-number_of_returns,-histogram", [1, 2, 3])[0]
+    assert left == [n for n in full if n not in ("return_ratio", "number_of_returns") and not n.startswith("dh_")]
+    assert len(left) == 81 - 2 - 3 * 7
+    assert feature_list("eigen,z,-z", [1])[0] == feature_list("eigen", [1])[0]
+    for spec, message in (("eigen,-z", "cannot leave out 'z'"), ("z,-z", "all were left out"),
+                          ("default,-planarty", "unknown feature 'planarty'")):
+        with pytest.raises(LidarfxError, match=message):
+            feature_list(spec, [1])
+    # a file that has the return fields but 0 in every point (AHN4 exports): the error names the fix ...
+    a = facades[0]
+    zero = np.zeros(len(a), np.uint8)
+    path = tmp_path / "noreturns.laz"
+    lidarfx.write(lidarfx.PointCloud(a.xyz, {**a.attrs, "return_number": zero, "number_of_returns": zero}), path)
+    model = tmp_path / "m.skops"
+    args = ["classify", "train", str(path), "--model", str(model), "--classes", FACADE6, "-r", "0.5",
+            "--max-per-class", "1000", "-q"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "has 'return_number' = 0 for every point" in err and "--features default,-return_ratio,-number_of_returns" in err
+    # ... and the fix trains a model with the default list's other inputs and the ALS building rule
+    assert main(args + ["--features", "default,-return_ratio,-number_of_returns", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["features"] == 27 and summary["min_building_area"] == 10.0  # 26 at 0.5 m + HAG

@@ -39,6 +39,14 @@ def test_features_cli_writes_float32_extra_dims(scene_las, tmp_path, capsys):
     assert summary["points"] == len(las.points) and summary["seconds"]["features_and_write"] >= 0
 
 
+def test_features_cli_leaves_features_out(scene_las, tmp_path):
+    out = tmp_path / "left.laz"
+    assert main(["features", str(scene_las), str(out), "-r", "0.5", "-f", "eigen,plane,-slope,-plane_std", "-q"]) == 0
+    names = {d.name for d in laspy.read(out).point_format.extra_dimensions}
+    assert {"planarity", "plane_distance", "plane_inlier_ratio"} <= names
+    assert not names & {"slope", "plane_std"}
+
+
 def test_features_cli_multiscale_names(scene_las, tmp_path):
     out = tmp_path / "multi.laz"
     assert main(["features", str(scene_las), str(out), "-r", "0.3", "-r", "0.6", "-f", "planarity", "-q"]) == 0
@@ -50,6 +58,7 @@ def test_features_cli_multiscale_names(scene_las, tmp_path):
     "args,message",
     [
         (["-r", "0.5", "--features", "planarty"], "unknown feature 'planarty'"),
+        (["-r", "0.5", "--features", "eigen,-slope"], "cannot leave out 'slope'"),
         (["--features", "eigen"], "give a radius"),
         (["-r", "-1"], "radii must be positive"),
         (["-n", "knn"], "k >= 1"),

@@ -478,3 +478,19 @@ def test_eigh3_matches_lapack(want_v1):
         assert np.linalg.norm(a @ v3 - lam[2] * v3) <= 1e-7 * max(w[-1], 1e-300) + 1e-300
         if want_v1:
             assert np.linalg.norm(a @ v1 - lam[0] * v1) <= 1e-7 * max(w[-1], 1e-300) + 1e-300
+
+
+def test_resolve_leaves_groups_and_features_out():
+    from lidarfx.features.registry import resolve
+
+    full = resolve("all").names
+    left = resolve("all,-quadric,-slope").names
+    assert left == [n for n in full if n not in ("quadric_inlier_ratio", "slope")]  # order kept
+    assert resolve(["eigen", "-eigenentropy"]).names == [n for n in resolve("eigen").names if n != "eigenentropy"]
+    assert resolve("echo,eigen,-echo").names == resolve("eigen").names  # a per-point group too
+    with pytest.raises(LidarfxError, match="cannot leave out 'plane'"):
+        resolve("eigen,-plane")
+    with pytest.raises(LidarfxError, match="unknown feature 'planarty'"):
+        resolve("eigen,-planarty")
+    with pytest.raises(LidarfxError, match="all were left out"):
+        resolve("eigen,-eigen")

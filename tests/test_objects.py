@@ -102,7 +102,7 @@ def test_drop_small_objects_relabels_small_inner_clusters_only():
     assert (out[part == 0] == 0).all()
     assert st == {"components": 3, "kept_at_edge": 1, "relabelled_components": 1,
                   "relabelled_points": int((part == 2).sum()), "see_through_components": 0,
-                  "see_through_points": 0}
+                  "see_through_points": 0, "see_through_untested": 0}
     assert (drop_small_objects(lab, alt, xyz, 2, 0.0) == lab).all()
     assert (drop_small_objects(lab, alt, xyz, 2, 200.0)[part == 1] == 1).all()  # a larger threshold takes the roof
     with pytest.raises(LidarfxError):
@@ -127,10 +127,12 @@ def test_see_through_test_takes_large_clusters_the_laser_passes():
     assert (out[part == 1] == 1).all() and (out[part == 3] == 2).all()
     assert st["see_through_components"] == 1 and st["see_through_points"] == len(roof)
     assert st["relabelled_components"] == 1 and st["relabelled_points"] == (part == 2).sum()  # the small rule
-    # no return numbers, a share of 1, or the rule switched off: no test
-    for kw in ({"returns": None}, {"max_multi_return_share": 1.0}):
+    # no return numbers (none, or 0 everywhere as in AHN4 exports), a share of 1, or the rule switched off: no test
+    for kw, untested in (({"returns": None}, 1), ({"returns": np.zeros_like(nr)}, 1),
+                         ({"max_multi_return_share": 1.0}, 0)):
         args = {"returns": nr, "max_multi_return_share": 0.5, **kw}
-        assert (drop_small_objects(lab, alt, xyz, 2, 10.0, **args)[part == 1] == 2).all()
+        assert (drop_small_objects(lab, alt, xyz, 2, 10.0, stats=st, **args)[part == 1] == 2).all()
+        assert st["see_through_untested"] == untested and st["see_through_components"] == 0
     assert (drop_small_objects(lab, alt, xyz, 2, 0.0, returns=nr, max_multi_return_share=0.5) == lab).all()
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(LidarfxError, match="multi-return share"):
@@ -145,6 +147,8 @@ def test_link_grows_only_for_sparse_clouds():
 def test_the_rule_is_part_of_the_als_default_only():
     assert TrainConfig().min_building_area == 10.0  # the default feature list (ALS)
     assert TrainConfig(features="eigen,plane").min_building_area == 0.0  # own features, e.g. TLS facades
+    # the default list with inputs left out (a survey without return numbers) is still the ALS default
+    assert TrainConfig(features="default,-return_ratio,-number_of_returns").min_building_area == 10.0
     assert TrainConfig(features="eigen", min_building_area=25).min_building_area == 25.0
     assert TrainConfig(min_building_area=0).min_building_area == 0.0
     with pytest.raises(LidarfxError):

@@ -896,6 +896,8 @@ def _small_buildings_line(sb: dict[str, Any]) -> str:
         text += (f"; see-through test (> {share:g} of the points from multi-return pulses): "
                  f"{sb.get('see_through_components', 0):,} clusters relabelled "
                  f"({sb.get('see_through_points', 0):,} points)")
+        if sb.get("see_through_untested"):
+            text += ", not run where the data record no return numbers"
     return text
 
 

@@ -153,7 +153,9 @@ class TrainConfig:
         else:
             self.density_augment = None
         if self.min_building_area is None:  # auto: part of the ALS default only (docs/classification.md §2)
-            self.min_building_area = DEFAULT_MIN_BUILDING_AREA if self.features is None else 0.0
+            # (also for "default,-name…": the default list with a few inputs left out)
+            default = self.features is None or any(f.lower() == "default" for f in self.features)
+            self.min_building_area = DEFAULT_MIN_BUILDING_AREA if default else 0.0
         from .objects import check_area, check_share
 
         self.min_building_area = check_area(self.min_building_area)

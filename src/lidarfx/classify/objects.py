@@ -107,8 +107,9 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     hull) that do not reach the data's edge take ``alternative`` (per point: its most
     probable other class).  So do the components of at least ``min_area`` m² in which
     more than ``max_multi_return_share`` of the points have ``returns`` (their pulse's
-    number of returns, per point) above 1; without ``returns``, or with a share of 1,
-    there is no such test.  ``min_area`` 0 switches both off.  ``xyz`` in metres; every
+    number of returns, per point) above 1; without ``returns`` (or with every value 0:
+    no return information), or with a share of 1, there is no such test
+    (``stats["see_through_untested"]`` is 1 when a share below 1 could not be tested).  ``min_area`` 0 switches both off.  ``xyz`` in metres; every
     point given is part of the data (its footprint defines the edge).  ``stats``, when
     given, receives the numbers of components found, kept at the edge and relabelled
     (small ones, see-through ones), and of points relabelled."""
@@ -117,9 +118,12 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     share = check_share(max_multi_return_share)
     out = labels.copy()
     b = np.flatnonzero(labels == target)
+    # number_of_returns all 0 (e.g. AHN4 exports): no return information, nothing to test
+    tested = returns is not None and share < 1 and bool(np.any(np.asarray(returns) > 0))
     if stats is not None:
         stats.update({"components": 0, "kept_at_edge": 0, "relabelled_components": 0, "relabelled_points": 0,
-                      "see_through_components": 0, "see_through_points": 0})
+                      "see_through_components": 0, "see_through_points": 0,
+                      "see_through_untested": int(share < 1 and not tested)})
     if min_area == 0 or not len(b):
         return out
     from ..segment.components import linked_components  # numba: loaded on first use
@@ -131,7 +135,7 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     touches = np.bincount(comp, weights=edge_mask(xyz, cell or link, ring)[b], minlength=k) > 0
     small = (area < min_area) & ~touches
     see_through = np.zeros(k, bool)
-    if returns is not None and share < 1:
+    if tested:
         multi = np.asarray(returns)[b] > 1
         see_through = (area >= min_area) & (np.bincount(comp, weights=multi, minlength=k)
                                             > share * np.bincount(comp, minlength=k))

@@ -187,6 +187,17 @@ def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | 
     tokens = [t.strip() for t in tokens if t and t.strip()]
     if not tokens:
         raise LidarfxError("no features requested")
+    # "default" = the default list; "-name" leaves a group, a feature or a per-point input out
+    # (the registry leaves out groups and features; the per-point inputs are left out here)
+    tokens = [x for t in tokens for x in (DEFAULT_FEATURES if t.lower() == "default" else (t,))]
+    drop = {t[1:].strip().lower() for t in tokens if t.startswith("-")} & set(EXTRA_INPUTS)
+    for d in sorted(drop):
+        if d not in (t.lower() for t in tokens):
+            raise LidarfxError(f"cannot leave out {d!r}: it is not among the requested features")
+    if drop:
+        tokens = [t for t in tokens if t.lower().lstrip("-").strip() not in drop]
+        if all(t.startswith("-") for t in tokens):
+            raise LidarfxError("no features requested (all were left out)")
     extras = [t for t in tokens if t.lower() in EXTRA_INPUTS]
     rest = [t for t in tokens if t.lower() not in EXTRA_INPUTS]
     slots: tuple = ()
@@ -332,9 +343,12 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         for feat in names:
             for field in _NEEDS.get(feat, ()):
                 if not _has_field(cloud, field):
+                    what = {"intensity": "no intensity", "gps_time": "no GPS time"}.get(field, "no return information")
+                    how = f"has no {field!r} field" if field not in cloud else f"has {field!r} = 0 for every point"
+                    lacking = [n for n in names if any(not _has_field(cloud, f) for f in _NEEDS.get(n, ()))]
                     raise LidarfxError(
-                        f"the features include {feat!r} but {name} has no {field!r} "
-                        "(no return information / intensity); use a model trained without it"
+                        f"the features include {feat!r} but {name} {how} ({what}); use a model trained "
+                        f"without it, e.g. --features default,{','.join('-' + n for n in lacking)}"
                     )
         if self.precomputed:
             unit = unit_to_metre(cloud)

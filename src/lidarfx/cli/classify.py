@@ -71,7 +71,9 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("-f", "--features", default=None,
                    help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
                         "return_number, intensity, intensity_norm, z, pulse_above, pulse_below "
-                        "(default: the ALS list, see --help epilog)")
+                        "(default: the ALS list, see --help epilog); 'default' is that list and -NAME leaves "
+                        "a group or name out, e.g. default,-return_ratio,-number_of_returns for files "
+                        "without return numbers")
     g.add_argument("-r", "--radius", type=float, action="append", default=None,
                    help="neighbourhood radius in m (repeat for multi-scale; default 1, 2, 3)")
     g.add_argument("--classes", default=None,
@@ -372,7 +374,8 @@ def run_predict(args) -> int:
     if sb:
         say(f"small-building rule ({model.min_building_area:g} m²): {sb['relabelled_components']:,} of "
             f"{sb['components']:,} predicted-building clusters relabelled ({sb['relabelled_points']:,} points)"
-            + (f"; see-through test (> {model.max_multi_return_share:g} of the points multi-return): "
+            + ("; see-through test not run: the file records no return numbers" if sb.get("see_through_untested")
+               else f"; see-through test (> {model.max_multi_return_share:g} of the points multi-return): "
                f"{sb['see_through_components']:,} larger ones relabelled ({sb['see_through_points']:,} points)"
                if model.max_multi_return_share < 1 else ""))
     say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "

@@ -2,7 +2,8 @@
 
 ``resolve(["eigen", "slope"])`` returns the ordered neighbourhood slots and
 the per-point features (``return_ratio``) a request needs.  Group names,
-single feature names and ``all`` may be mixed; unknown names raise a
+single feature names and ``all`` may be mixed, and ``-name`` leaves a group or a
+feature out again (``all,-quadric``); unknown names raise a
 :class:`~lidarfx.errors.LidarfxError` listing what exists.
 """
 from __future__ import annotations
@@ -72,9 +73,15 @@ def resolve(features: str | Iterable[str] | None) -> Request:
         if s not in slots:
             slots.append(s)
 
+    drop: list[str] = []
     for raw in features:
         name = raw.strip().lower()
         if not name:
+            continue
+        if name.startswith("-"):  # "-quadric", "-slope": leave a group or a feature out
+            if not name[1:].strip():
+                raise LidarfxError("'-' must be followed by the group or feature to leave out")
+            drop.append(raw.strip()[1:].strip())
             continue
         if name == "all":
             for g in ALL_GROUPS:
@@ -99,6 +106,12 @@ def resolve(features: str | Iterable[str] | None) -> Request:
                 f"unknown feature {raw.strip()!r}; groups: {groups}, all; "
                 "or any single feature name (see docs/features.md)"
             )
+    for d in drop:
+        out = resolve([d])  # a group or a feature name (unknown names raise)
+        if not set(out.slots) & set(slots) and not set(out.point) & set(point):
+            raise LidarfxError(f"cannot leave out {d!r}: it is not among the requested features")
+        slots = [s for s in slots if s not in out.slots]
+        point = [p for p in point if p not in out.point]
     if not slots and not point:
-        raise LidarfxError("no features requested")
+        raise LidarfxError("no features requested" + (" (all were left out)" if drop else ""))
     return Request(tuple(slots), tuple(point))
