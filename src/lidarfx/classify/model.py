@@ -154,7 +154,7 @@ class TrainConfig:
             self.density_augment = None
         if self.min_building_area is None:  # auto: part of the ALS default only (docs/classification.md §2)
             # (also for "default,-name…": the default list with a few inputs left out)
-            default = self.features is None or any(f.lower() == "default" for f in self.features)
+            default = self.features is None or any(f.strip().lower() == "default" for f in self.features)
             self.min_building_area = DEFAULT_MIN_BUILDING_AREA if default else 0.0
         from .objects import check_area, check_share
 

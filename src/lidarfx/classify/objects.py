@@ -109,8 +109,9 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     more than ``max_multi_return_share`` of the points have ``returns`` (their pulse's
     number of returns, per point) above 1; without ``returns`` (or with every value 0:
     no return information), or with a share of 1, there is no such test
-    (``stats["see_through_untested"]`` is 1 when a share below 1 could not be tested).  ``min_area`` 0 switches both off.  ``xyz`` in metres; every
-    point given is part of the data (its footprint defines the edge).  ``stats``, when
+    (``stats["see_through_untested"]`` is 1 when a share below 1 could not be tested).
+    ``min_area`` 0 switches both off.  ``xyz`` in metres; every point given is part of
+    the data (its footprint defines the edge).  ``stats``, when
     given, receives the numbers of components found, kept at the edge and relabelled
     (small ones, see-through ones), and of points relabelled."""
     labels = np.asarray(labels)

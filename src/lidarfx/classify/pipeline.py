@@ -346,10 +346,10 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     what = {"intensity": "no intensity", "gps_time": "no GPS time"}.get(field, "no return information")
                     how = f"has no {field!r} field" if field not in cloud else f"has {field!r} = 0 for every point"
                     lacking = [n for n in names if any(not _has_field(cloud, f) for f in _NEEDS.get(n, ()))]
-                    raise LidarfxError(
-                        f"the features include {feat!r} but {name} {how} ({what}); use a model trained "
-                        f"without it, e.g. --features default,{','.join('-' + n for n in lacking)}"
-                    )
+                    hint = (f", e.g. --features default,{','.join('-' + n for n in lacking)}"
+                            if set(lacking) <= set(DEFAULT_FEATURES) else "")
+                    raise LidarfxError(f"the features include {feat!r} but {name} {how} ({what}); "
+                                       f"use a model trained without {', '.join(lacking)}{hint}")
         if self.precomputed:
             unit = unit_to_metre(cloud)
             if unit != 1.0:
