@@ -66,6 +66,18 @@ def test_metrics_on_a_hand_computed_matrix():
     assert m["mean_iou"] == pytest.approx((50 / 65 + 35 / 50) / 2)
 
 
+def test_a_class_without_reference_points_is_left_out_of_the_means_and_says_so():
+    from lidarfx.classify.evaluate import format_metrics
+
+    m = metrics([[50, 10, 0], [5, 35, 0], [0, 0, 0]], ["a", "b", "c"])  # c: never in the reference
+    assert m["mean_f1"] == pytest.approx((100 / 115 + 70 / 85) / 2)
+    rows: dict[str, str] = {}
+    for line in format_metrics(m).splitlines():  # the class table comes before the confusion matrix
+        if line.startswith("  "):
+            rows.setdefault(line.split()[0], line)
+    assert "not in the means" in rows["c"] and "not in the means" not in rows["a"] + rows["b"]
+
+
 def test_block_bootstrap_intervals():
     from lidarfx.classify import block_bootstrap, block_ids
 

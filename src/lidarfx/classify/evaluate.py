@@ -864,7 +864,8 @@ def format_metrics(m: dict[str, Any], title: str | None = None) -> str:
     lines.append(f"  {'class':<{w}} {'codes':>8} {'support':>9} {'PA':>7} {'UA':>7} {'F1':>7} {'IoU':>7}")
     for c in m["classes"]:
         lines.append(f"  {c['name']:<{w}} {str(c['code']):>8} {c['support']:>9,} {_f(c['pa']):>7} "
-                     f"{_f(c['ua']):>7} {_f(c['f1']):>7} {_f(c['iou']):>7}")
+                     f"{_f(c['ua']):>7} {_f(c['f1']):>7} {_f(c['iou']):>7}"
+                     + ("  (no reference points: not in the means)" if c["support"] == 0 else ""))
     lines.append(f"  confusion matrix ({LAYOUT}):")
     cw = max(9, max(len(f"{v:,}") for row in m["confusion"] for v in row) + 1)
     lines.append("  " + " " * w + "".join(f"{c['name'][:cw - 1]:>{cw}}" for c in m["classes"]))
