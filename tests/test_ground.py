@@ -408,6 +408,12 @@ def test_height_above_ground_is_tiled_above_the_limit(monkeypatch):
 
 
 # ------------------------------------------------------------------ rasters
+def test_raster_cell_of():
+    r = Raster(np.zeros((3, 4), np.float32), (10.0, 25.0), 0.5)  # x 10–12, y 23.5–25, row 0 = north
+    row, col = r.cell_of([10.0, 10.49, 10.5, 11.99, 9.0, 13.0], [25.0, 24.99, 24.5, 23.51, 30.0, 20.0])
+    assert row.tolist() == [0, 0, 1, 2, 0, 2] and col.tolist() == [0, 0, 1, 3, 0, 3]  # outside: nearest edge cell
+
+
 def test_raster_writers(tmp_path):
     PIL = pytest.importorskip("PIL.Image")
     a = np.arange(12, dtype=np.float32).reshape(3, 4)

@@ -531,9 +531,7 @@ def terrain_slope(cloud: PointCloud) -> np.ndarray:
         return np.full(n, np.nan, dtype=np.float32)
     r = dtm(cloud, resolution=1.0 / unit_to_metre(cloud), ground=mask)  # 1 m cells whatever the unit
     g = gradient_slope(np.asarray(r.array, dtype=np.float64), r.resolution)
-    x0, y0 = r.origin
-    col = np.clip(((cloud.x - x0) / r.resolution).astype(np.int64), 0, g.shape[1] - 1)
-    row = np.clip(((y0 - cloud.y) / r.resolution).astype(np.int64), 0, g.shape[0] - 1)
+    row, col = r.cell_of(cloud.x, cloud.y)
     return np.degrees(np.arctan(g[row, col])).astype(np.float32)
 
 

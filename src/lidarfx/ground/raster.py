@@ -82,6 +82,14 @@ class Raster:
         r = self.resolution
         return x0 + (np.arange(cols) + 0.5) * r, y0 - (np.arange(rows) + 0.5) * r
 
+    def cell_of(self, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
+        """``(row, col)`` of the cell that holds each map coordinate; points outside the
+        raster take the nearest edge cell."""
+        rows, cols = self.array.shape
+        col = np.floor((np.asarray(x, dtype=np.float64) - self.origin[0]) / self.resolution)
+        row = np.floor((self.origin[1] - np.asarray(y, dtype=np.float64)) / self.resolution)
+        return (np.clip(row, 0, rows - 1).astype(np.int64), np.clip(col, 0, cols - 1).astype(np.int64))
+
     def sample(self, x: Any, y: Any) -> np.ndarray:
         """Bilinear value at map coordinates (cell values sit at cell centres).
 
