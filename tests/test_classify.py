@@ -1210,7 +1210,12 @@ def test_default_list_with_inputs_left_out(facades, tmp_path, capsys):
     assert left == [n for n in full if n not in ("return_ratio", "number_of_returns") and not n.startswith("dh_")]
     assert len(left) == 81 - 2 - 3 * 7
     assert feature_list("eigen,z,-z", [1])[0] == feature_list("eigen", [1])[0]
+    assert feature_list("eigen,-eigen,z", [1])[0] == ["z"]  # inputs remain: not "all were left out"
+    # the registry's group "ground" is the input height_above_ground, once
+    assert feature_list("default,-ground", [1, 2, 3])[0] == [n for n in full if n != "height_above_ground"]
+    assert feature_list("default,ground", [1, 2, 3])[0] == full
     for spec, message in (("eigen,-z", "cannot leave out 'z'"), ("z,-z", "all were left out"),
+                          ("-z,z", "requested before it"), ("default,--z", "one '-' leaves"),
                           ("default,-planarty", "unknown feature 'planarty'")):
         with pytest.raises(LidarfxError, match=message):
             feature_list(spec, [1])
@@ -1229,3 +1234,11 @@ def test_default_list_with_inputs_left_out(facades, tmp_path, capsys):
     assert main(args + ["--features", "default,-return_ratio,-number_of_returns", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["features"] == 27 and summary["min_building_area"] == 10.0  # 26 at 0.5 m + HAG
+    # predicting: the building rule runs, its see-through test says it cannot
+    assert main(["classify", "predict", str(path), str(tmp_path / "o.laz"), "--model", str(model)]) == 0
+    assert "see-through test not run: the file records no return numbers" in capsys.readouterr().err
+    # a model with a list of its own gets its own list back in the hint, without the lacking input
+    from lidarfx.classify.pipeline import LidarFeatures
+
+    with pytest.raises(LidarfxError, match=r"without number_of_returns, e\.g\. --features eigen,plane$"):
+        LidarFeatures(features="eigen,number_of_returns,plane", radii=[0.5]).check_cloud(lidarfx.read(path))

@@ -494,3 +494,12 @@ def test_resolve_leaves_groups_and_features_out():
         resolve("eigen,-planarty")
     with pytest.raises(LidarfxError, match="all were left out"):
         resolve("eigen,-eigen")
+    # left to right: a removal takes out what came before it, a later name adds it back
+    assert set(resolve("all,-eigen,linearity").names) == set(full) - set(resolve("eigen").names) | {"linearity"}
+    assert resolve("eigen,-eigen,planarity").names == ["planarity"]
+    with pytest.raises(LidarfxError, match="requested before it"):
+        resolve("-eigen,eigen")
+    with pytest.raises(LidarfxError, match="one '-' leaves"):
+        resolve("eigen,--slope")
+    with pytest.raises(LidarfxError, match="classifier's default list"):
+        resolve("default")  # a classifier keyword: the feature engine says where it belongs

@@ -133,6 +133,12 @@ def test_see_through_test_takes_large_clusters_the_laser_passes():
         args = {"returns": nr, "max_multi_return_share": 0.5, **kw}
         assert (drop_small_objects(lab, alt, xyz, 2, 10.0, stats=st, **args)[part == 1] == 2).all()
         assert st["see_through_untested"] == untested and st["see_through_components"] == 0
+    from lidarfx.classify.evaluate import _small_buildings_line
+
+    line = _small_buildings_line({**st, "see_through_untested": 1, "min_building_area": 10.0,
+                                  "max_multi_return_share": 0.5})
+    assert line.endswith("not run where the data record no return numbers")
+    assert "not run" not in _small_buildings_line({**st, "min_building_area": 10.0, "max_multi_return_share": 0.5})
     assert (drop_small_objects(lab, alt, xyz, 2, 0.0, returns=nr, max_multi_return_share=0.5) == lab).all()
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(LidarfxError, match="multi-return share"):

@@ -124,7 +124,7 @@ def drop_small_objects(labels: np.ndarray, alternative: np.ndarray, xyz: np.ndar
     if stats is not None:
         stats.update({"components": 0, "kept_at_edge": 0, "relabelled_components": 0, "relabelled_points": 0,
                       "see_through_components": 0, "see_through_points": 0,
-                      "see_through_untested": int(share < 1 and not tested)})
+                      "see_through_untested": int(min_area > 0 and share < 1 and not tested)})
     if min_area == 0 or not len(b):
         return out
     from ..segment.components import linked_components  # numba: loaded on first use

@@ -187,26 +187,35 @@ def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | 
     tokens = [t.strip() for t in tokens if t and t.strip()]
     if not tokens:
         raise LidarfxError("no features requested")
-    # "default" = the default list; "-name" leaves a group, a feature or a per-point input out
-    # (the registry leaves out groups and features; the per-point inputs are left out here)
+    # "default" = the default list; "-name" takes a group, a feature or a per-point input out of what
+    # came before it (the registry handles groups and features, the per-point inputs are handled here)
     tokens = [x for t in tokens for x in (DEFAULT_FEATURES if t.lower() == "default" else (t,))]
-    drop = {t[1:].strip().lower() for t in tokens if t.startswith("-")} & set(EXTRA_INPUTS)
-    for d in sorted(drop):
-        if d not in (t.lower() for t in tokens):
-            raise LidarfxError(f"cannot leave out {d!r}: it is not among the requested features")
-    if drop:
-        tokens = [t for t in tokens if t.lower().lstrip("-").strip() not in drop]
-        if all(t.startswith("-") for t in tokens):
-            raise LidarfxError("no features requested (all were left out)")
-    extras = [t for t in tokens if t.lower() in EXTRA_INPUTS]
-    rest = [t for t in tokens if t.lower() not in EXTRA_INPUTS]
+    extras: list[str] = []
+    rest: list[str] = []
+    for t in tokens:
+        neg = t.startswith("-")
+        bare = t[1:].strip().lower() if neg else t.lower()
+        bare = "height_above_ground" if bare == "ground" else bare  # the registry's group of that one input
+        if bare not in EXTRA_INPUTS:
+            rest.append(t)
+        elif not neg:
+            if bare not in extras:
+                extras.append(bare)
+        elif bare in extras:
+            extras.remove(bare)
+        else:
+            raise LidarfxError(f"cannot leave out {bare!r}: it is not among the features requested before it")
     slots: tuple = ()
     point: list[str] = []
     rs = radii_list(None, radii)
     if rest:
-        req = resolve(rest)
+        req = resolve(rest, allow_empty=True)
         slots, point = req.slots, list(req.point)
-        check_options(req, rs, neighbourhood, k)  # the feature engine's own checks
+        if slots or point:
+            check_options(req, rs, neighbourhood, k)  # the feature engine's own checks
+    if not slots and not point and not extras:
+        left = any(t.startswith("-") for t in tokens)
+        raise LidarfxError("no features requested" + (" (all were left out)" if left else ""))
     if len({scale_suffix(r) for r in rs}) != len(rs):
         raise LidarfxError(f"radii must differ in the second decimal: {rs}")
     names: list[str] = []
@@ -214,13 +223,7 @@ def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | 
         suffixes = [f"_k{int(k)}"] if neighbourhood == "knn" else [scale_suffix(r) for r in rs]
         for sfx in suffixes:
             names += [S.NAMES[s] + sfx for s in slots]
-    names += point
-    seen = set()
-    for e in extras:
-        e = e.lower()
-        if e not in seen:
-            names.append(e)
-            seen.add(e)
+    names += point + extras
     return names, tuple(slots), point, rs
 
 
@@ -337,6 +340,18 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         return tags
 
     # ------------------------------------------------------------------ internals
+    def _hint(self, lacking: list[str]) -> str:
+        """", e.g. --features …": this transformer's own list without the ``lacking`` inputs."""
+        spec = self.features
+        tokens = ["default"] if spec is None else [str(t).strip() for t in (spec.split(",") if isinstance(spec, str)
+                                                                            else spec)]
+        tokens = [t for t in tokens if t]
+        asked = {t.lower() for t in tokens}
+        kept = [t for t in tokens if t.lower() not in lacking]
+        if not [t for t in kept if not t.startswith("-")]:
+            return ""
+        return f", e.g. --features {','.join(kept + ['-' + n for n in lacking if n not in asked])}"
+
     def check_cloud(self, cloud: PointCloud, name: str = "the cloud") -> None:
         """Refuse a cloud that lacks a field the features need (clear one-line error)."""
         names, *_ = self._plan()
@@ -346,10 +361,8 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     what = {"intensity": "no intensity", "gps_time": "no GPS time"}.get(field, "no return information")
                     how = f"has no {field!r} field" if field not in cloud else f"has {field!r} = 0 for every point"
                     lacking = [n for n in names if any(not _has_field(cloud, f) for f in _NEEDS.get(n, ()))]
-                    hint = (f", e.g. --features default,{','.join('-' + n for n in lacking)}"
-                            if set(lacking) <= set(DEFAULT_FEATURES) else "")
                     raise LidarfxError(f"the features include {feat!r} but {name} {how} ({what}); "
-                                       f"use a model trained without {', '.join(lacking)}{hint}")
+                                       f"use a model trained without {', '.join(lacking)}{self._hint(lacking)}")
         if self.precomputed:
             unit = unit_to_metre(cloud)
             if unit != 1.0:

@@ -2,8 +2,8 @@
 
 ``resolve(["eigen", "slope"])`` returns the ordered neighbourhood slots and
 the per-point features (``return_ratio``) a request needs.  Group names,
-single feature names and ``all`` may be mixed, and ``-name`` leaves a group or a
-feature out again (``all,-quadric``); unknown names raise a
+single feature names and ``all`` may be mixed, and ``-name`` takes a group or a
+feature out of what came before it (``all,-quadric``); unknown names raise a
 :class:`~lidarfx.errors.LidarfxError` listing what exists.
 """
 from __future__ import annotations
@@ -59,8 +59,14 @@ def available() -> dict[str, list[str]]:
     return out
 
 
-def resolve(features: str | Iterable[str] | None) -> Request:
-    """Turn group / feature names (or a comma-separated string) into a :class:`Request`."""
+def resolve(features: str | Iterable[str] | None, *, allow_empty: bool = False) -> Request:
+    """Turn group / feature names (or a comma-separated string) into a :class:`Request`.
+
+    Tokens are read from left to right; ``-name`` takes a group or a feature out of
+    what the tokens before it asked for (``all,-eigen,linearity`` keeps ``linearity``).
+    ``allow_empty``: return an empty request instead of refusing it (a caller that
+    adds inputs of its own checks the whole list).
+    """
     if features is None:
         features = DEFAULT_FEATURES
     if isinstance(features, str):
@@ -73,15 +79,21 @@ def resolve(features: str | Iterable[str] | None) -> Request:
         if s not in slots:
             slots.append(s)
 
-    drop: list[str] = []
     for raw in features:
         name = raw.strip().lower()
         if not name:
             continue
         if name.startswith("-"):  # "-quadric", "-slope": leave a group or a feature out
-            if not name[1:].strip():
+            d = name[1:].strip()
+            if not d:
                 raise LidarfxError("'-' must be followed by the group or feature to leave out")
-            drop.append(raw.strip()[1:].strip())
+            if d.startswith("-"):
+                raise LidarfxError(f"{raw.strip()!r}: one '-' leaves a group or a feature out")
+            out = resolve([d])  # a group or a feature name (unknown names raise)
+            if not set(out.slots) & set(slots) and not set(out.point) & set(point):
+                raise LidarfxError(f"cannot leave out {d!r}: it is not among the features requested before it")
+            slots[:] = [s for s in slots if s not in out.slots]
+            point[:] = [p for p in point if p not in out.point]
             continue
         if name == "all":
             for g in ALL_GROUPS:
@@ -100,18 +112,16 @@ def resolve(features: str | Iterable[str] | None) -> Request:
         elif name in POINT_NAMES:
             if name not in point:
                 point.append(name)
+        elif name == "default":
+            raise LidarfxError("'default' adds the classifier's default list (lidarfx classify --features) and "
+                               "cannot be left out; the feature engine's default is eigen,plane,density")
         else:
             groups = ", ".join(list(S.GROUPS) + list(POINT_FEATURES))
             raise LidarfxError(
                 f"unknown feature {raw.strip()!r}; groups: {groups}, all; "
                 "or any single feature name (see docs/features.md)"
             )
-    for d in drop:
-        out = resolve([d])  # a group or a feature name (unknown names raise)
-        if not set(out.slots) & set(slots) and not set(out.point) & set(point):
-            raise LidarfxError(f"cannot leave out {d!r}: it is not among the requested features")
-        slots = [s for s in slots if s not in out.slots]
-        point = [p for p in point if p not in out.point]
-    if not slots and not point:
-        raise LidarfxError("no features requested" + (" (all were left out)" if drop else ""))
+    if not slots and not point and not allow_empty:
+        left = any(str(t).strip().startswith("-") for t in features)
+        raise LidarfxError("no features requested" + (" (all were left out)" if left else ""))
     return Request(tuple(slots), tuple(point))
