@@ -192,12 +192,14 @@ def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | 
     tokens = [x for t in tokens for x in (DEFAULT_FEATURES if t.lower() == "default" else (t,))]
     extras: list[str] = []
     rest: list[str] = []
+    hag_names = ("ground", "height_above_ground")  # the registry's group "ground" is this one input
     for t in tokens:
         neg = t.startswith("-")
         bare = t[1:].strip().lower() if neg else t.lower()
-        bare = "height_above_ground" if bare == "ground" else bare  # the registry's group of that one input
-        if bare not in EXTRA_INPUTS:
-            rest.append(t)
+        if neg and bare in hag_names and "height_above_ground" in extras:
+            extras.remove("height_above_ground")
+        elif bare not in EXTRA_INPUTS or (neg and bare in hag_names):
+            rest.append(t)  # groups and features, and the height above ground asked for as group "ground"
         elif not neg:
             if bare not in extras:
                 extras.append(bare)
@@ -223,7 +225,7 @@ def feature_list(features: str | Iterable[str] | None, radii: Sequence[float] | 
         suffixes = [f"_k{int(k)}"] if neighbourhood == "knn" else [scale_suffix(r) for r in rs]
         for sfx in suffixes:
             names += [S.NAMES[s] + sfx for s in slots]
-    names += point + extras
+    names += point + [e for e in extras if e not in point]
     return names, tuple(slots), point, rs
 
 
