@@ -72,8 +72,8 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
                    help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
                         "return_number, intensity, intensity_norm, z, pulse_above, pulse_below "
                         "(default: the ALS list, see --help epilog); 'default' is that list and -NAME takes "
-                        "a group or name out of what came before it, e.g. default,-return_ratio,-number_of_returns for files "
-                        "without return numbers")
+                        "a group or name out of what came before it, e.g. default,-return_ratio,-number_of_returns "
+                        "for files without return numbers")
     g.add_argument("-r", "--radius", type=float, action="append", default=None,
                    help="neighbourhood radius in m (repeat for multi-scale; default 1, 2, 3)")
     g.add_argument("--classes", default=None,

@@ -34,8 +34,9 @@ def register(sub) -> None:
     p.add_argument("input", nargs="?", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.npz)")
     p.add_argument("output", nargs="?", help="output point cloud (format from the extension)")
     p.add_argument("-r", "--radius", type=float, action="append", help="neighbourhood radius in m (repeat for multi-scale)")
-    p.add_argument("-f", "--features", default=None, help="comma-separated groups or names; -NAME takes one out of what came before it, e.g. all,-quadric "
-                   "(default: eigen,plane,density)")
+    p.add_argument("-f", "--features", default=None,
+                   help="comma-separated groups or names; -NAME takes one out of what came before it, "
+                   "e.g. all,-quadric (default: eigen,plane,density)")
     p.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere")
     p.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn (a radius then caps the search)")
     p.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z: orient normals towards it (TLS)")
