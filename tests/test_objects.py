@@ -1,7 +1,6 @@
 """The object-size rule after classification: components, hull areas, data edge, relabelling."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -292,6 +291,38 @@ def test_cross_validation_applies_the_rule_per_held_out_part(town_model):
     assert cm_rule.sum() == cm_plain.sum()
     if rule.stats["relabelled_points"]:  # every relabelled point left the building column
         assert cm_rule[:, 2].sum() < cm_plain[:, 2].sum()
+
+
+@pytest.mark.parametrize("spec, target", [("ground=2,vegetation=5,building=6", 2),
+                                          ("building=6,ground=2,vegetation=5", 0)])
+def test_the_rule_in_a_fold_whose_training_part_lacks_the_building_class(spec, target):
+    """A held-out part whose training part has no building points (a small file, fine blocks, a
+    buffer): the estimator knows fewer classes than the map.  The rule must read its probability
+    columns as the estimator's classes, not as class indices (it raised an IndexError with building
+    last in the map, and took the ground column for the building one with building first)."""
+    a, b = _town(3), _town(4)
+    cls = np.asarray(b["classification"]).copy()
+    cls[cls == 6] = 1  # b: no building labels (its houses become unlabelled context points)
+    b["classification"] = cls
+    srcs = read_sources([a, b])
+    cmap = resolve_classes(srcs, spec)
+    cfg = TrainConfig(features="eigen,plane,height_above_ground", radii=[1.0, 2.0], max_per_class=2000,
+                      terrain_augment=0, classifier="rf", n_estimators=10, min_building_area=10)
+    lab = _labelled(srcs, cmap)
+    from lidarfx.classify.evaluate import _file_features
+
+    X = _file_features(srcs, cmap, cfg, False, lab)[0]
+    y, g = lab[1], lab[3]
+    rule = HeldOutRule(srcs, cmap, cfg, lab, X, target)
+    rule.set_folds("files", g)
+    pred_rule = np.full(len(y), -1)
+    pred_plain = np.full(len(y), -1)
+    cross_validate(X, y, g, cfg, 3, post=rule, out_pred=pred_rule)
+    cross_validate(X, y, g, cfg, 3, out_pred=pred_plain)
+    held_a = g == 0  # predicted by a model of b alone: it knows no building, so the rule has nothing to do
+    assert set(np.unique(pred_plain[held_a])) <= set(range(3)) - {target}
+    assert (pred_rule[held_a] == pred_plain[held_a]).all()
+    assert (y[held_a] == target).sum() > 5000  # a's houses are there, and called something else
 
 
 def test_cli_min_building_area(tmp_path, capsys, town_model):

@@ -394,7 +394,7 @@ class HeldOutRule:
         from .objects import link_for
 
         idxs, y, _, g = labelled
-        self.target, self.area = target, float(config.min_building_area)
+        self.target, self.area, self.k = target, float(config.min_building_area), len(cmap)
         self.share = float(config.max_multi_return_share)
         tr = config.transformer(progress=progress)
         xyz_l, xyz_c, Xc, g_c, nr_l, nr_c = [], [], [], [], [], []
@@ -443,9 +443,17 @@ class HeldOutRule:
         from .fastpredict import predict_proba
         from .objects import drop_small_objects
 
+        def proba(X: np.ndarray) -> np.ndarray:
+            # columns = class indices of the map: a fold's training part may lack a class
+            # (small files, fine blocks, buffers), and then the estimator knows fewer columns
+            P = np.zeros((len(X), self.k))
+            if len(X):
+                P[:, np.asarray(est.classes_, np.int64)] = predict_proba(est, X)
+            return P
+
         ctx = np.flatnonzero(self.folds_c == f)
-        P = predict_proba(est, self.X_c[ctx]) if len(ctx) else np.empty((0, 0))
-        P_te = predict_proba(est, self.X[te])
+        P = proba(self.X_c[ctx])
+        P_te = proba(self.X[te])
         out = P_te.argmax(axis=1)
         for i in np.unique(self.g[te]):
             a = np.flatnonzero(self.g[te] == i)

@@ -313,7 +313,9 @@ def _labels(src: Source, classes: ClassMap) -> np.ndarray:
 
 
 def resolve_classes(sources: list[Source], classes: Any = None, ignore: Iterable[int] | None = None) -> ClassMap:
-    """The class map: parsed from ``classes`` or one class per code found, minus ``ignore``."""
+    """The class map: parsed from ``classes`` or one class per code found, minus ``ignore``
+    (without ``classes``, ``ignore`` adds to :data:`DEFAULT_IGNORE`; to keep one of those codes,
+    list the classes)."""
     if classes is not None:
         cm = ClassMap.parse(classes)
         if ignore:
@@ -324,7 +326,7 @@ def resolve_classes(sources: list[Source], classes: Any = None, ignore: Iterable
         if "classification" not in s.cloud:
             raise LidarfxError(f"{s.name} has no classification: training needs labelled points")
         codes |= set(np.unique(s.cloud["classification"]).tolist())
-    return ClassMap.from_codes(codes, DEFAULT_IGNORE if ignore is None else ignore)
+    return ClassMap.from_codes(codes, set(DEFAULT_IGNORE) | {int(c) for c in (ignore or ())})
 
 
 # --------------------------------------------------------------------------- model
@@ -837,7 +839,8 @@ def train(
         Paths or :class:`~lidarfx.PointCloud` objects with a ``classification``.
     classes:
         Class map (``"2,3+4+5,6"``; see :class:`ClassMap`); default: one class
-        per code found, minus ``ignore`` (default 0, 1, 7, 18).
+        per code found, minus 0, 1, 7, 18 and the codes in ``ignore``.  With ``classes``,
+        ``ignore`` removes codes from its groups.
     config, **params:
         A :class:`TrainConfig`, or its fields as keywords: ``features``,
         ``radii``, ``classifier`` (``hgb``/``rf``/``nb``), ``max_per_class``

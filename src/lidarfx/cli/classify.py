@@ -79,7 +79,8 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("--classes", default=None,
                    help="class map: 2,3+4+5,6 (merge with +, name with ground=2; unlisted classes are ignored); "
                         "default: every class found except 0, 1, 7, 18")
-    g.add_argument("--ignore", default=None, help="comma-separated class codes to leave out, e.g. 1,64")
+    g.add_argument("--ignore", default=None, help="comma-separated class codes to leave out, e.g. 64 (without --classes: "
+                        "besides 0,1,7,18, which are always left out then)")
     g.add_argument("--classifier", choices=["hgb", "rf", "nb"], default="hgb",
                    help="hgb = gradient boosting (default), rf = random forest, nb = Gaussian naive Bayes")
     g.add_argument("--n-estimators", type=int, default=None,
