@@ -171,26 +171,28 @@ def test_building_class_is_the_class_holding_code_6():
 
 
 # --------------------------------------------------------------------------- in a model
-def _town(seed: int, hedges: bool = True) -> lidarfx.PointCloud:
+def _town(seed: int, hedges: bool = True, size: float = 60.0, density: float = 20.0) -> lidarfx.PointCloud:
     """Ground, three 12 × 12 m flat houses and single trees (round crowns) at 20 pts/m²;
     with ``hedges`` also six clipped hedges (vegetation, 2 × 2 m flat tops 3 m high) that
-    look like small roofs to a model trained without them."""
+    look like small roofs to a model trained without them.  ``size``: the scene's side in m
+    (60; positions and house sides scale with it, crowns and hedges keep their size)."""
     rng = np.random.default_rng(seed)
-    n = 20 * 60 * 60
-    xy = rng.random((n, 2)) * 60
+    s = size / 60.0
+    n = int(density * size * size)
+    xy = rng.random((n, 2)) * size
     z = np.zeros(n)
     cls = np.full(n, 2, np.uint8)
-    for hx, hy in ((8, 8), (35, 10), (15, 38)):
-        inside = (xy[:, 0] > hx) & (xy[:, 0] < hx + 12) & (xy[:, 1] > hy) & (xy[:, 1] < hy + 12)
+    for hx, hy in ((8 * s, 8 * s), (35 * s, 10 * s), (15 * s, 38 * s)):
+        inside = (xy[:, 0] > hx) & (xy[:, 0] < hx + 12 * s) & (xy[:, 1] > hy) & (xy[:, 1] < hy + 12 * s)
         z[inside], cls[inside] = 6.0, 6
-    for tx, ty in rng.random((12, 2)) * [20, 20] + [38, 36]:
+    for tx, ty in (rng.random((12, 2)) * [20, 20] + [38, 36]) * s:
         d = np.hypot(xy[:, 0] - tx, xy[:, 1] - ty)
         crown = (d < 2.5) & (cls == 2) & (rng.random(n) < 0.7)
         z[crown] = 4 + 3 * np.sqrt(np.clip(1 - (d[crown] / 2.5) ** 2, 0, 1)) + rng.normal(0, 0.3, crown.sum())
         cls[crown] = 5
     if hedges:
         for hx, hy in ((32, 30), (5, 28), (50, 5), (25, 25), (28, 52), (52, 24)):
-            top = (np.abs(xy[:, 0] - hx) < 1) & (np.abs(xy[:, 1] - hy) < 1) & (cls == 2)
+            top = (np.abs(xy[:, 0] - hx * s) < 1) & (np.abs(xy[:, 1] - hy * s) < 1) & (cls == 2)
             z[top], cls[top] = 3.0, 5
     xyz = np.c_[xy + [7.7e5, 6.27e6], z + rng.normal(0, 0.03, n) + 50]
     return lidarfx.PointCloud(xyz, {"classification": cls})
@@ -219,11 +221,17 @@ def test_model_stores_and_applies_the_rule(town_model, tmp_path):
     # the confidence of a relabelled point is its new class's probability (below the building's)
     codes, conf = town_model.predict(cloud, return_confidence=True)
     assert (codes == rule).all() and np.isfinite(conf).all()
-    assert (conf[changed] <= 0.5).all() and (conf[~changed] >= 1 / 3).all()
     # the per-class probabilities are the classifier's, before the rule: building is still the top class there
     _, proba = town_model.predict(cloud, return_proba=True)
     top = town_model.classes.code_of(proba.argmax(axis=1))
     assert (top == plain).all() and (top[changed] == 6).all()
+    b = town_model.classes.codes.index(6)
+    others = proba.copy()
+    others[:, b] = -1.0  # the best class but building: the one a relabelled point gets, and its probability
+    assert (rule[changed] == town_model.classes.code_of(others[changed].argmax(axis=1))).all()
+    np.testing.assert_array_equal(conf[changed], others[changed].max(axis=1))
+    np.testing.assert_array_equal(conf[~changed], proba[~changed].max(axis=1))
+    assert (conf[changed] <= proba[changed, b]).all()
     town_model.set_min_building_area(0)
     try:
         path = town_model.save(tmp_path / "m.skops")
@@ -280,17 +288,22 @@ def test_cross_validation_applies_the_rule_per_held_out_part(town_model):
     fold_of = dict(zip(key(rule.xyz, g), fb))
     assert rule.folds_c.tolist() == [fold_of.get(k, -1) for k in key(rule.xyz_c, rule.g_c)]
     rule.set_folds("files", g)
-    cm_rule, _, fitted = cross_validate(X, y, g, cfg, 3, post=rule)
-    assert rule.stats["components"] > 0
+    pred_rule, pred_plain = np.full(len(y), -1), np.full(len(y), -1)
+    cm_rule, _, fitted = cross_validate(X, y, g, cfg, 3, post=rule, out_pred=pred_rule)
+    assert rule.stats["components"] > 0 and rule.stats["relabelled_points"] > 0
     cfg0 = TrainConfig(**{**cfg.to_dict(), "min_building_area": 0.0})
     rule0 = HeldOutRule(srcs, cmap, cfg0, lab, X, 2)
     rule0.set_folds("files", g)
     cm0, _, _ = cross_validate(X, y, g, cfg, 3, post=rule0)
-    cm_plain, _, _ = cross_validate(X, y, g, cfg, 3)
+    cm_plain, _, _ = cross_validate(X, y, g, cfg, 3, out_pred=pred_plain)
     assert (cm0 == cm_plain).all()
-    assert cm_rule.sum() == cm_plain.sum()
-    if rule.stats["relabelled_points"]:  # every relabelled point left the building column
-        assert cm_rule[:, 2].sum() < cm_plain[:, 2].sum()
+    assert (cm_rule.sum(axis=1) == cm_plain.sum(axis=1)).all()  # the same reference points
+    # every relabelled labelled point left the building column, and nothing else moved
+    changed = pred_rule != pred_plain
+    assert changed.any() and (pred_plain[changed] == 2).all() and (pred_rule[changed] != 2).all()
+    assert cm_plain[:, 2].sum() - cm_rule[:, 2].sum() == changed.sum()
+    # the rule's counts also hold the context points relabelled with them
+    assert changed.sum() <= rule.stats["relabelled_points"] + rule.stats["see_through_points"]
 
 
 @pytest.mark.parametrize("spec, target", [("ground=2,vegetation=5,building=6", 2),
@@ -317,8 +330,11 @@ def test_the_rule_in_a_fold_whose_training_part_lacks_the_building_class(spec, t
     rule.set_folds("files", g)
     pred_rule = np.full(len(y), -1)
     pred_plain = np.full(len(y), -1)
-    cross_validate(X, y, g, cfg, 3, post=rule, out_pred=pred_rule)
-    cross_validate(X, y, g, cfg, 3, out_pred=pred_plain)
+    _, folds_rule, _ = cross_validate(X, y, g, cfg, 3, post=rule, out_pred=pred_rule, class_names=cmap.names)
+    _, folds_plain, _ = cross_validate(X, y, g, cfg, 3, out_pred=pred_plain)
+    # the fold holding out a (trained on b) says it cannot predict building; the other does not
+    assert [pf.get("not_trained") for pf in folds_rule] == [["building"], None]
+    assert [pf.get("not_trained") for pf in folds_plain] == [[target], None]  # indices without names
     held_a = g == 0  # predicted by a model of b alone: it knows no building, so the rule has nothing to do
     assert set(np.unique(pred_plain[held_a])) <= set(range(3)) - {target}
     assert (pred_rule[held_a] == pred_plain[held_a]).all()
@@ -340,7 +356,12 @@ def test_cli_min_building_area(tmp_path, capsys, town_model):
                  "--min-building-area", "0"]) == 0
     s0 = json.loads(capsys.readouterr().out)
     assert s0["min_building_area"] == 0.0 and s0["small_buildings"] is None
-    assert s0["classes"].get(6, s0["classes"].get("6")) >= s["classes"].get(6, s["classes"].get("6"))
+    sb = s["small_buildings"]
+    assert sb["relabelled_points"] > 0  # the hedges
+    # every point the rule relabels leaves class 6: the written classes differ by exactly that many
+    six, six0 = s["classes"].get(6, s["classes"].get("6")), s0["classes"].get(6, s0["classes"].get("6"))
+    assert six0 - six == sb["relabelled_points"] + sb["see_through_points"]
+    assert sum(s["classes"].values()) == sum(s0["classes"].values()) == s["points"]
     assert main(["classify", "predict", str(src), str(out), "-m", str(m), "-q", "--min-building-area", "-3"]) == 2
     assert "minimum building area" in capsys.readouterr().err
     assert s["max_multi_return_share"] == 0.5 and s["small_buildings"]["see_through_components"] == 0  # no returns

@@ -320,7 +320,7 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                    log: Callable[[str], None] | None = None, X_aug: Sequence[np.ndarray] = (),
                    exclude: np.ndarray | None = None,
                    post: Callable[[int, Any, np.ndarray], np.ndarray] | None = None,
-                   out_pred: np.ndarray | None = None,
+                   out_pred: np.ndarray | None = None, class_names: Sequence[str] | None = None,
                    ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
     """Train on all folds but one (balanced sample, as :func:`train` does), predict the
     held-out fold, for every fold.  ``X_aug``: features of the same points in
@@ -331,7 +331,9 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
     (:func:`block_buffer_mask`, :func:`file_buffer_mask`).  ``post(f, estimator, held_out)``,
     when given, replaces the plain prediction of the held-out points (class indices;
     e.g. the object-size rule, :class:`HeldOutRule`).  ``out_pred`` (length n), when given,
-    receives every held-out point's predicted class index.  Returns the summed confusion matrix,
+    receives every held-out point's predicted class index.  A fold whose training part lacks a
+    class lists it (``class_names``, else indices) in ``not_trained``: that fold cannot predict it.
+    Returns the summed confusion matrix,
     per-fold results and
     the fitted estimators with their held-out indices."""
     from .model import _aug_cap
@@ -369,12 +371,24 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                          "seconds": round(time.perf_counter() - t0, 3)})
         if exclude is not None:
             per_fold[-1]["buffer_excluded"] = int((exclude[f] & (folds != f) & (y >= 0)).sum())
+        absent = [c for c in range(n_classes) if not (yf == c).any()]
+        if absent:
+            per_fold[-1]["not_trained"] = [class_names[c] if class_names else c for c in absent]
         fitted.append((est, te))
         if log:
             copies = f" ({len(s):,} + {len(yf) - len(s):,} from augmented copies)" if len(yf) > len(s) else ""
             log(f"  fold {int(f)}: train {len(yf):,}{copies} / test {len(te):,} points, OA {m['oa']:.4f}, "
-                f"mean F1 {m['mean_f1']:.4f}")
+                f"mean F1 {m['mean_f1']:.4f}{_not_trained(per_fold[-1])}")
     return cm, per_fold, fitted
+
+
+def _not_trained(fold: dict[str, Any]) -> str:
+    """The note on a fold whose training part lacks classes (empty if none)."""
+    absent = fold.get("not_trained")
+    if not absent:
+        return ""
+    return (f"; its training part has no {', '.join(repr(str(a)) for a in absent)} points, so none of its "
+            f"held-out points can be called {'that' if len(absent) == 1 else 'those'}")
 
 
 class HeldOutRule:
@@ -790,7 +804,8 @@ def evaluate(
                                int(cv or 0), cv_seed, float(block_size or 0))
             held = np.full(len(y), -1, np.int64)
             cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug,
-                                                  exclude=near.get(key), post=rule, out_pred=held)
+                                                  exclude=near.get(key), post=rule, out_pred=held,
+                                                  class_names=cmap.names)
             if key == "leave_one_file_out":
                 for pf in per_fold:
                     pf["file"] = srcs[pf["fold"]].name
@@ -927,7 +942,7 @@ def format_report(report: dict[str, Any]) -> str:
             label = Path(pf["file"]).name if "file" in pf else f"fold {pf['fold']}"
             left = f", {pf['buffer_excluded']:,} training points in the buffer" if pf.get("buffer_excluded") else ""
             out.append(f"  {label}: test {pf['test_points']:,} points, OA {_f(pf['oa'])}, "
-                       f"mean F1 {_f(pf['mean_f1'])}{left}")
+                       f"mean F1 {_f(pf['mean_f1'])}{left}{_not_trained(pf)}")
         if sec.get("small_buildings"):
             out.append(_small_buildings_line(sec["small_buildings"]))
         if key == "test":

@@ -71,7 +71,7 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("-f", "--features", default=None,
                    help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
                         "return_number, intensity, intensity_norm, z, pulse_above, pulse_below "
-                        "(default: the ALS list, see --help epilog); 'default' is that list and -NAME takes "
+                        "(default: the ALS list of docs/classification.md §6); 'default' is that list and -NAME takes "
                         "a group or name out of what came before it, e.g. default,-return_ratio,-number_of_returns "
                         "for files without return numbers")
     g.add_argument("-r", "--radius", type=float, action="append", default=None,
@@ -101,7 +101,9 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("--density-augment", default=None, metavar="F[,F...]",
                    help="add copies of the training files thinned to these fractions of their pulses "
                         "(e.g. 0.5,0.25,0.125) for models that will classify sparser clouds; default none")
-    g.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere")
+    g.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere",
+                   help="neighbourhood: sphere of each radius (default), vertical cylinder of each radius, "
+                        "or the k nearest points (-k)")
     g.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn")
     g.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z (TLS normals)")
     g.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
@@ -110,14 +112,14 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("--min-building-area", type=float, default=None, metavar="M2",
                    help="predicted-building clusters (points 1 m apart linked) with a smaller plan footprint "
                         "(convex hull, m²) that do not reach the cloud's edge get their next most probable "
-                        "class; 0 = off; stored in the model; default 10 with the default features (ALS), "
-                        "0 with --features")
+                        "class; 0 = off; stored in the model; default 10 with the default features (ALS, also "
+                        "any --features list containing 'default'), 0 with other --features")
     g.add_argument("--max-multi-return-share", type=float, default=None, metavar="S",
                    help="with the rule above: a predicted-building cluster of at least that area in which more "
                         "than this share of the points come from pulses with several returns (a tree crown lets "
                         "the laser through, a roof does not) gets its next class too; 1 = off; stored in the "
                         "model; default 0.5")
-    g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier")
+    g.add_argument("--seed", type=int, default=0, help="seed of the training sample and the classifier (default 0)")
     g.add_argument("--jobs", type=int, default=None,
                    help="threads of the classifier fit (rf: all cores; hgb: the cores idle when the fit "
                         "starts, see docs)")
@@ -280,9 +282,13 @@ def _ignore(args):
     if not args.ignore:
         return None
     try:
-        return [int(v) for v in args.ignore.split(",") if v.strip()]
+        codes = [int(v) for v in args.ignore.split(",") if v.strip()]
     except ValueError:
         raise LidarfxError(f"--ignore takes comma-separated class codes, got {args.ignore!r}") from None
+    bad = [c for c in codes if not 0 <= c <= 255]
+    if bad:
+        raise LidarfxError(f"--ignore: class codes must be 0..255, got {bad[0]}")
+    return codes
 
 
 def run_train(args) -> int:
