@@ -16,6 +16,7 @@ right points and pass their settings on, each one against an independent computa
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -403,3 +404,70 @@ def test_cli_bad_ignore_is_a_one_line_error(ignore_file, capsys, value, message)
     err = capsys.readouterr().err.strip()
     assert err.splitlines() == [f"lidarfx: error: {message}"]
     assert not (d / "bad.skops").exists()
+
+
+# --------------------------------------------------------------------------- CLI options reach the model
+@pytest.mark.parametrize("args, want", [
+    (["--features", "eigen,plane,height_above_ground", "-r", "1", "-r", "1.5", "-n", "cylinder", "--bins", "7",
+      "--ground", "class", "--hag-cap", "3", "--max-disc-points", "60", "--terrain-augment", "0",
+      "--classifier", "rf", "--n-estimators", "5", "--max-per-class", "300", "--no-balance", "--seed", "7",
+      "--jobs", "1", "--min-building-area", "4", "--max-multi-return-share", "0.8"],
+     {"features": ["eigen", "plane", "height_above_ground"], "radii": [1.0, 1.5], "neighbourhood": "cylinder", "k": None,
+      "hist_bins": 7, "ground": "class", "hag_cap": 3.0, "max_disc_points": 60.0, "terrain_augment": 0,
+      "classifier": "rf", "n_estimators": 5, "max_per_class": 300, "balance": False, "seed": 7, "n_jobs": 1,
+      "min_building_area": 4.0, "max_multi_return_share": 0.8}),
+    (["--features", "eigen", "-n", "knn", "-k", "8", "--scanner", "1,2,30", "--hag-cap", "0", "--max-disc-points",
+      "0", "--max-per-class", "0", "--terrain-augment", "2", "--classifier", "nb"],
+     {"features": ["eigen"], "radii": [], "neighbourhood": "knn", "k": 8, "scanner": [1.0, 2.0, 30.0], "hag_cap": None,
+      "max_disc_points": None, "max_per_class": None, "terrain_augment": 2, "classifier": "nb", "balance": True,
+      "min_building_area": 0.0}),
+])
+def test_cli_train_options_reach_the_model(ignore_file, capsys, args, want):
+    """Every training option of the CLI lands in the model's stored configuration."""
+    d, p = ignore_file
+    m = d / "options.skops"
+    assert main(["classify", "train", str(p), "--model", str(m), "--classes", "2,5,6", "-q", *args]) == 0
+    capsys.readouterr()
+    assert main(["classify", "info", str(m), "--json"]) == 0
+    cfg = json.loads(capsys.readouterr().out)["config"]
+    got = {key: cfg[key] for key in want}
+    if isinstance(got.get("scanner"), (list, tuple)):
+        got["scanner"] = [float(v) for v in got["scanner"]]
+    assert got == want
+
+
+def test_cli_evaluate_modes_write_their_sections(tmp_path, capsys):
+    """--leave-one-out, --test (two files: a confusion PNG each) and --backward-elimination through the CLI."""
+    files = []
+    for seed in (41, 42, 43, 44):
+        files.append(tmp_path / f"s{seed}.laz")
+        lidarfx.write(_scene(seed, size=40.0, density=10.0, extras=False), files[-1])
+    out = tmp_path / "eval"
+    rc = main(["classify", "evaluate", str(files[0]), str(files[1]), "--classes", "2,5,6", "--leave-one-out",
+               "--buffer", "0", "--test", str(files[2]), str(files[3]), "--backward-elimination", "--out", str(out),
+               "--bootstrap", "0", *CLI_FAST[:-1], "--json", "-q"])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out)
+    rep = json.loads((out / "report.json").read_text())
+    assert set(rep["sections"]) == {"leave_one_file_out", "test"}  # --test and --leave-one-out: no CV
+    assert [Path(pf["file"]).name for pf in rep["sections"]["leave_one_file_out"]["folds"]] == ["s41.laz", "s42.laz"]
+    assert sorted(Path(f).name for f in rep["sections"]["test"]["files"]) == ["s43.laz", "s44.laz"]
+    pngs = sorted(f.name for f in out.glob("*.png"))
+    for name in ("confusion_leave_one_file_out.png", "confusion_test.png", "confusion_test_s43.png",
+                 "confusion_test_s44.png", "errors_s43.png", "errors_s44.png", "backward_elimination.png"):
+        assert name in pngs, (name, pngs)
+    steps = rep["backward_elimination"]["steps"]
+    n0 = len(rep["features"])
+    assert steps[0]["n_features"] == n0 and steps[-1]["n_features"] == 1
+    assert all(a["n_features"] > b["n_features"] for a, b in zip(steps, steps[1:]))
+    assert summary["sections"]["test"]["metrics"] == rep["sections"]["test"]["metrics"]  # --json: the report
+
+
+def test_default_radii_depend_on_the_neighbourhood():
+    from lidarfx.classify.pipeline import DEFAULT_RADII
+
+    assert TrainConfig().radii == TrainConfig(neighbourhood="cylinder").radii == list(DEFAULT_RADII)
+    assert TrainConfig(neighbourhood="knn", k=8).radii == []  # kNN: no radius unless a cap is given
+    assert TrainConfig(neighbourhood="knn", k=8, radii=[4.0]).radii == [4.0]
+    with pytest.raises(LidarfxError, match="at most one radius"):
+        TrainConfig(neighbourhood="knn", k=8, radii=[1.0, 2.0])

@@ -13,7 +13,7 @@ import datetime as _dt
 import os
 import time
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
@@ -103,10 +103,13 @@ def cloud_density(cloud: PointCloud) -> float:
 # --------------------------------------------------------------------------- configuration
 @dataclass
 class TrainConfig:
-    """Everything that defines a model before it sees data (stored in the model file)."""
+    """Everything that defines a model before it sees data (stored in the model file).
+
+    ``radii`` None: 1, 2 and 3 m for spheres and cylinders, none for kNN (whose one radius
+    would only cap the neighbour distance)."""
 
     features: list[str] | None = None
-    radii: list[float] = field(default_factory=lambda: list(DEFAULT_RADII))
+    radii: list[float] | None = None
     neighbourhood: str = "sphere"
     k: int | None = None
     scanner: list[float] | None = None
@@ -131,7 +134,9 @@ class TrainConfig:
             self.features = [f.strip() for f in self.features.split(",") if f.strip()]
         elif self.features is not None:
             self.features = [str(f) for f in self.features]
-        self.radii = sorted(set(float(r) for r in (self.radii or [])))
+        if self.radii is None:
+            self.radii = [] if self.neighbourhood == "knn" else list(DEFAULT_RADII)
+        self.radii = sorted(set(float(r) for r in self.radii))
         if self.scanner is not None:
             self.scanner = [float(v) for v in self.scanner]
             if len(self.scanner) != 3:

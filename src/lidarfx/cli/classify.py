@@ -250,11 +250,10 @@ def _log(args):
 
 def _config(args):
     from ..classify import TrainConfig
-    from ..classify.pipeline import DEFAULT_RADII
 
     return TrainConfig(
         features=args.features,
-        radii=args.radius if args.radius else list(DEFAULT_RADII),
+        radii=args.radius or None,  # None: the default radii (none for knn)
         neighbourhood=args.neighbourhood,
         k=args.k,
         scanner=args.scanner,
