@@ -471,3 +471,62 @@ def test_default_radii_depend_on_the_neighbourhood():
     assert TrainConfig(neighbourhood="knn", k=8, radii=[4.0]).radii == [4.0]
     with pytest.raises(LidarfxError, match="at most one radius"):
         TrainConfig(neighbourhood="knn", k=8, radii=[1.0, 2.0])
+
+
+# --------------------------------------------------------------------------- smaller contracts
+def test_terrain_shear_moves_z_by_a_function_of_xy_only():
+    """The augmentation copy: every point moves by f(x, y) (walls stay vertical), slopes stay
+    below the two sines' bound, and the height above the (class-2) ground barely changes."""
+    from lidarfx.classify.pipeline import hag, terrain_shear
+
+    town = _town(5, size=60.0, density=20.0)
+    xyz = np.vstack([town.xyz, town.xyz[:500] + [0, 0, 7.5]])  # a second point above 500 of them: a "wall"
+    cls = np.r_[np.asarray(town["classification"]), np.full(500, 6, np.uint8)]
+    cloud = lidarfx.PointCloud(xyz, {"classification": cls})
+    for seed in (0, 1, 2):
+        sh = terrain_shear(cloud, seed)
+        dz = sh.xyz[:, 2] - xyz[:, 2]
+        assert (sh.xyz[:, :2] == xyz[:, :2]).all()
+        np.testing.assert_allclose(dz[-500:], dz[:500], atol=1e-9)  # same (x, y), same shift
+        assert 0.5 < np.ptp(dz) <= 40.0  # two sines of 4–10 m
+        order = np.argsort(xyz[:, 0])
+        step = np.hypot(*np.diff(xyz[order, :2], axis=0).T)
+        far = step > 0.05
+        # the steepest slope of A·sin + B·sin with A, B ≤ 10 m and wavelengths ≥ 60 m: atan(2π·10/60·√2)
+        grad = np.abs(np.diff(dz[order]))[far] / step[far]
+        assert grad.max() <= 2 * np.pi * 10 / 60 * np.sqrt(2) * 1.001
+        # the true height above the terrain is unchanged: measured against the class-2 ground, exactly
+        # on the ground and within a few cm on the trees; under the 12 m houses the TIN spans the gap
+        # linearly where the shift curves, so roofs move by decimetres (SMRF, the default ground, is
+        # recomputed on the copy and errs there as it would on real slopes)
+        d = np.abs(hag(sh, "class") - hag(cloud, "class"))
+        assert d[cls == 2].max() < 1e-4 and np.percentile(d[cls == 5], 99) < 0.05
+        assert 0.1 < np.percentile(d[cls == 6], 99) < 1.0
+
+
+def test_input_errors_are_lidarfx_errors():
+    from lidarfx.classify import confusion_matrix, random_folds
+
+    with pytest.raises(LidarfxError, match="differ in length"):
+        confusion_matrix(np.array([0, 1]), np.array([0]), 2)
+    with pytest.raises(LidarfxError, match="out of range"):
+        confusion_matrix(np.array([0, 2]), np.array([0, 1]), 2)
+    with pytest.raises(LidarfxError, match="square"):
+        metrics(np.ones((2, 3)))
+    with pytest.raises(LidarfxError, match="not both"):
+        evaluate([_scene(1, size=20.0, extras=False)], classes="2,5,6", config=TrainConfig(), classifier="rf")
+    with pytest.raises(LidarfxError, match="not both"):
+        train([_scene(1, size=20.0, extras=False)], classes="2,5,6", config=TrainConfig(), classifier="rf")
+    with pytest.raises(LidarfxError, match="cannot make"):
+        random_folds(2, 3)
+
+
+def test_random_folds_fall_back_to_plain_folds_for_a_tiny_class():
+    from lidarfx.classify import random_folds
+
+    y = np.r_[np.zeros(60, int), np.ones(60, int), [2]]  # class 2 has one point: no stratification
+    f = random_folds(len(y), 3, seed=0, y=y)
+    assert sorted(np.bincount(f).tolist()) == [40, 40, 41]
+    y2 = np.r_[np.zeros(60, int), np.ones(30, int)]
+    f2 = random_folds(len(y2), 3, seed=0, y=y2)  # stratified: every fold holds a third of each class
+    assert [np.bincount(f2[y2 == c]).tolist() for c in (0, 1)] == [[20, 20, 20], [10, 10, 10]]

@@ -660,10 +660,12 @@ def terrain_shear(cloud: PointCloud, seed: int = 0) -> PointCloud:
     """A copy with z + f(x, y), f a smooth random terrain (training augmentation).
 
     f = A·sin(2πx/Lx + φ) + B·sin(2πy/Ly + ψ), A, B ∈ [4, 10] m, Lx, Ly ∈
-    [60, 120] m, phases random (seeded): slopes up to about 45°.  A vertical
-    shift that depends only on (x, y) keeps walls and trunks vertical and leaves
-    the height above ground unchanged, so labels stay valid while the ground
-    (and roofs) get slopes the training tiles may not have.
+    [60, 120] m, phases random (seeded): each sine up to about 46°, both together up
+    to about 56°.  A vertical shift that depends only on (x, y) keeps walls and trunks
+    vertical and leaves the true height above the terrain unchanged, so labels stay
+    valid while the ground (and roofs) get slopes the training tiles may not have.
+    (The height-above-ground *feature* is recomputed on the copy, by SMRF by default,
+    and errs there as it would on real slopes.)
     """
     rng = np.random.default_rng(seed)
     u = unit_to_metre(cloud)
