@@ -530,3 +530,16 @@ def test_random_folds_fall_back_to_plain_folds_for_a_tiny_class():
     y2 = np.r_[np.zeros(60, int), np.ones(30, int)]
     f2 = random_folds(len(y2), 3, seed=0, y=y2)  # stratified: every fold holds a third of each class
     assert [np.bincount(f2[y2 == c]).tolist() for c in (0, 1)] == [[20, 20, 20], [10, 10, 10]]
+
+
+def test_ignoring_a_code_renames_only_the_default_names():
+    m = ClassMap.parse("2,5+64,6,veg=3+4+7:4").without([64, 7])
+    assert m.names == ("ground", "high vegetation", "building", "veg")  # 'high vegetation/class 64' no more
+    assert m.groups == ((2,), (5,), (6,), (3, 4)) and m.codes == (2, 5, 6, 4)
+    assert ClassMap.parse("2,3+4+5:3,6").without([3]).codes == (2, 4, 6)  # the output code left with its code
+    # numpy arrays as ignore lists (truth value of an array is ambiguous)
+    from lidarfx.classify.model import read_sources, resolve_classes
+
+    srcs = read_sources([_scene(1, size=20.0)])
+    assert resolve_classes(srcs, None, np.array([64, 5])).spec() == "ground=2,building=6"
+    assert resolve_classes(srcs, "2,5+64,6", np.array([64])).spec() == "ground=2,high vegetation=5,building=6"

@@ -114,7 +114,7 @@ class ClassMap:
             if g2:
                 groups.append(g2)
                 codes.append(c if c in g2 else g2[0])
-                names.append(n)
+                names.append(_default_name(g2) if n == _default_name(g) else n)  # a given name stays
         return ClassMap(tuple(groups), tuple(codes), tuple(names))
 
     # ------------------------------------------------------------------- use

@@ -321,6 +321,7 @@ def resolve_classes(sources: list[Source], classes: Any = None, ignore: Iterable
     """The class map: parsed from ``classes`` or one class per code found, minus ``ignore``
     (without ``classes``, ``ignore`` adds to :data:`DEFAULT_IGNORE`; to keep one of those codes,
     list the classes)."""
+    ignore = [] if ignore is None else [int(c) for c in ignore]  # any iterable, numpy arrays too
     if classes is not None:
         cm = ClassMap.parse(classes)
         if ignore:
@@ -331,7 +332,7 @@ def resolve_classes(sources: list[Source], classes: Any = None, ignore: Iterable
         if "classification" not in s.cloud:
             raise LidarfxError(f"{s.name} has no classification: training needs labelled points")
         codes |= set(np.unique(s.cloud["classification"]).tolist())
-    return ClassMap.from_codes(codes, set(DEFAULT_IGNORE) | {int(c) for c in (ignore or ())})
+    return ClassMap.from_codes(codes, set(DEFAULT_IGNORE) | set(ignore))
 
 
 # --------------------------------------------------------------------------- model
