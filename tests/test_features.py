@@ -91,6 +91,16 @@ def test_slope_and_aspect_of_tilted_planes(slope, aspect):
     assert np.isfinite(out["slope"][sel]).mean() > 0.95
 
 
+def test_aspect_stays_below_360_in_float32():
+    """A north-facing plane: atan2 just below 0 gives 359.99999…, which float32 would round to 360."""
+    xyz, _ = tilted_plane(30, 0)
+    out = compute_features(PointCloud(xyz), ["aspect", "msac_aspect"], radius=0.5)
+    for name in ("aspect", "msac_aspect"):
+        a = out[name][np.isfinite(out[name])]
+        assert a.dtype == np.float32 and a.min() >= 0.0 and a.max() < 360.0, name
+        assert ((a < 0.1) | (a > 359.9)).mean() > 0.99  # all of them north
+
+
 def test_slope_with_noise():
     xyz, _ = tilted_plane(35, 200, noise=0.01)
     out = compute_features(PointCloud(xyz), ["slope", "aspect"], radius=1.0)

@@ -220,6 +220,23 @@ def test_units_follow_the_crs():
         classify_ground(c, units="feet")
 
 
+def test_ground_eval_converts_units_as_the_ground_command_does(tmp_path, capsys):
+    """ground-eval filters a copy without classes; it must keep the header's CRS (feet here)."""
+    f = REAL / "autzen_trim.laz"  # US survey feet
+    if not f.exists():
+        pytest.skip(f"missing {f}")
+    c = lidarfx.read(f).subset(np.arange(30000))
+    p = tmp_path / "autzen_part.laz"
+    lidarfx.write(c, p)
+    assert main(["ground-eval", str(p), "--json", "-q"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    got = got["files"][0]
+    want = lidarfx.ground.ground_errors(classify_ground(c), np.asarray(c["classification"]) == 2)
+    native = lidarfx.ground.ground_errors(classify_ground(c, units="native"), np.asarray(c["classification"]) == 2)
+    assert native["n_type_ii"] != want["n_type_ii"] or native["n_type_i"] != want["n_type_i"]  # the unit matters
+    assert (got["n_type_i"], got["n_type_ii"]) == (want["n_type_i"], want["n_type_ii"])
+
+
 def test_bad_parameters_and_empty_input():
     xyz = np.random.default_rng(0).random((50, 3))
     with pytest.raises(LidarfxError):

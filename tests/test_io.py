@@ -543,6 +543,31 @@ def test_isprs_pts_with_column_spec(tmp_path):
     assert cloud["classification"].dtype == np.uint8 and cloud["classification"].tolist() == [2, 2, 6]
 
 
+def test_leica_pts_point_count_line_and_default_columns(tmp_path):
+    (tmp_path / "scan.pts").write_text("3\n1.5 2.5 3.5 -120 255 128 0\n2 3 4 -7 1 2 3\n5 6 7 40 9 9 9\n")
+    cloud = read(tmp_path / "scan.pts")
+    assert cloud.xyz.tolist() == [[1.5, 2.5, 3.5], [2, 3, 4], [5, 6, 7]]  # the count line is not a point
+    assert cloud.names == ["intensity", "red", "green", "blue"]
+    assert cloud["intensity"].tolist() == [-120, -7, 40]  # PTS intensity is signed: it stays float
+    assert cloud["red"].dtype == np.uint16 and cloud["red"].tolist() == [255, 1, 9]
+    (tmp_path / "four.pts").write_text("2\n1 2 3 10\n4 5 6 20\n")
+    assert read(tmp_path / "four.pts").names == ["intensity"]
+    # the same layout as .txt: no default names, and the count line is still skipped
+    (tmp_path / "scan.txt").write_text("# from a scanner\n2\n1 2 3 10\n4 5 6 20\n")
+    cloud = read(tmp_path / "scan.txt")
+    assert cloud.names == ["col3"] and len(cloud) == 2
+    (tmp_path / "one.txt").write_text("7\n8\n")  # a one-column file is no cloud
+    with pytest.raises(LidarfxError, match="no column named y, z"):
+        read(tmp_path / "one.txt")
+
+
+def test_column_spec_takes_the_header_aliases(tmp_path):
+    (tmp_path / "a.txt").write_text("1 2 3 6 200\n4 5 6 2 100\n")
+    cloud = read(tmp_path / "a.txt", columns="x,y,z,class,r")
+    assert cloud.names == ["classification", "red"]
+    assert cloud["classification"].dtype == np.uint8 and cloud["classification"].tolist() == [6, 2]
+
+
 def test_oakland_xyz_label_conf_defaults(tmp_path):
     (tmp_path / "oakland_part3_am.xyz_label_conf").write_text(
         "-159.57 -51.36 -6.45 1004 1.0\n-159.57 -51.47 -6.46 1100 0.83\n-159.47 -51.48 -6.44 1200 1\n"

@@ -31,18 +31,19 @@ def register(sub) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("input", nargs="?", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.npz)")
+    p.add_argument("input", nargs="?", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.pts/.npy/.npz)")
     p.add_argument("output", nargs="?", help="output point cloud (format from the extension)")
-    p.add_argument("-r", "--radius", type=float, action="append", help="neighbourhood radius in m (repeat for multi-scale)")
+    p.add_argument("-r", "--radius", type=float, action="append", help="neighbourhood radius in coordinate units, m for metre data (repeat for multi-scale)")
     p.add_argument("-f", "--features", default=None,
                    help="comma-separated groups or names; -NAME takes one out of what came before it, "
                    "e.g. all,-quadric (default: eigen,plane,density)")
-    p.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere")
+    p.add_argument("-n", "--neighbourhood", "--neighborhood", choices=["sphere", "cylinder", "knn"], default="sphere",
+                   help="sphere of each radius (default), vertical cylinder of each radius, or the k nearest points")
     p.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn (a radius then caps the search)")
     p.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z: orient normals towards it (TLS)")
-    p.add_argument("--height", type=float, default=None, help="half-height limit of the vertical cylinder (m)")
+    p.add_argument("--height", type=float, default=None, help="half-height limit of the vertical cylinder (coordinate units)")
     p.add_argument("--convention", choices=["default", "cloudcompare", "pdal"], default="default")
-    p.add_argument("--d-max", type=float, default=0.10, help="plane inlier distance (m), default 0.10")
+    p.add_argument("--d-max", type=float, default=0.10, help="plane inlier distance (coordinate units), default 0.10")
     p.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
     p.add_argument("--seed", type=int, default=0, help="seed of the MSAC generator")
     p.add_argument("--columns", default=None, help="column spec for text input, e.g. x,y,z,intensity")

@@ -225,7 +225,8 @@ def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict,
         raise LidarfxError(f"{path}: no points to evaluate"
                            + (f" (classes {sorted(set(ignore_classes))} ignored)" if len(cloud) else ""))
     attrs = {k: cloud[k][keep] for k in ("return_number", "number_of_returns") if k in cloud}
-    bare = PointCloud(cloud.xyz[keep], attrs)  # xyz and returns only: no classes
+    # xyz and returns only, no classes; the header's CRS gives the unit (metre lengths on feet data)
+    bare = PointCloud(cloud.xyz[keep], attrs, header=cloud.header, meta=cloud.meta)
     t0 = time.perf_counter()
     pred = classify_ground(bare, ignore_classes=None, progress=progress, **params)
     sec = time.perf_counter() - t0

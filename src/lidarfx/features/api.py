@@ -105,7 +105,7 @@ def check_options(req, rs, neighbourhood="sphere", k=None, convention="default",
     elif not rs:
         raise LidarfxError("give a radius (e.g. radius=0.5) or several radii")
     elif len(set(_suffixes(rs))) < len(rs):
-        raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii at least 0.01 m apart")
+        raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii that differ when rounded to 2 decimals")
     if hist_bins < 2:
         raise LidarfxError("hist_bins must be >= 2")
     if height is not None and not height > 0:

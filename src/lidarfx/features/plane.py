@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from . import slots as S
 
@@ -47,6 +48,9 @@ def write_plane(o, col, first, nx, ny, nz, cx, cy, cz, need_slope):
     S.put(o, col, first + 3, slope)
     if slope >= 0.1 and col[first + 4] >= 0:
         sg = 1.0 if nz >= 0.0 else -1.0  # aspect of the up-facing normal
-        S.put(o, col, first + 4, math.degrees(math.atan2(sg * nx, sg * ny)) % 360.0)
+        aspect = math.degrees(math.atan2(sg * nx, sg * ny)) % 360.0
+        if np.float32(aspect) >= 360.0:  # just below 360 rounds up to it in float32: [0, 360) is 0 there
+            aspect = 0.0
+        S.put(o, col, first + 4, aspect)
     S.put(o, col, first + 5, -(cx * nx + cy * ny + cz * nz))
     return slope

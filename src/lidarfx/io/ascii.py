@@ -9,8 +9,12 @@ Reading
       line (the first non-comment line when one of its fields is not a number,
       e.g. CloudCompare's ``//X,Y,Z,R,G,B`` or ``x y z intensity``; names are
       lower-cased, quotes and a leading ``//`` removed, ``r/g/b`` read as
-      ``red/green/blue``), the format default (Oakland: ``x y z label
-      confidence``), else ``x, y, z, col3, col4, ...``.
+      ``red/green/blue`` and ``class`` as ``classification``, in a spec too),
+      the format default (Oakland: ``x y z label confidence``; Leica ``.pts``
+      with 4 or 7 columns: ``x y z intensity [red green blue]``), else
+      ``x, y, z, col3, col4, ...``.
+    * A first data line holding one whole number followed by lines of three or
+      more columns is a point count (Leica ``.pts``) and is skipped.
     * Values are parsed as float64 (``numpy.loadtxt``); columns named like an
       integer LAS dimension (``classification``, ``return_number``,
       ``intensity``, ``red`` ...) or ``label`` / ``segment_id`` become that
@@ -37,6 +41,7 @@ READ_ERRORS = (ValueError, UnicodeDecodeError, OSError)
 
 SKIP_NAMES = frozenset({"-", "skip"})
 DEFAULT_COLUMNS = {".xyz_label_conf": ["x", "y", "z", "label", "confidence"]}
+_PTS_COLUMNS = {4: ["x", "y", "z", "intensity"], 7: ["x", "y", "z", "intensity", "red", "green", "blue"]}
 _ALIASES = {"r": "red", "g": "green", "b": "blue", "class": "classification"}
 _EXTRA_INTEGER_COLUMNS = {"label": np.dtype(np.int32), "segment_id": np.dtype(np.int32)}
 _WRITE_BLOCK = 100_000
@@ -89,13 +94,15 @@ def _resolve_names(spec: list[str] | None, header: list[str] | None, ncols: int,
     if spec is not None:
         if len(spec) > ncols:
             raise LidarfxError(f"column spec has {len(spec)} names but the file has {ncols} columns")
-        names = [s.strip() for s in spec]
+        names = [_ALIASES.get(s.strip(), s.strip()) for s in spec]
     elif header is not None:
         if len(header) != ncols:
             raise LidarfxError(f"header line has {len(header)} names but the data has {ncols} columns")
         names = header
     elif ext in DEFAULT_COLUMNS and len(DEFAULT_COLUMNS[ext]) <= ncols:
         names = DEFAULT_COLUMNS[ext]
+    elif ext == ".pts" and ncols in _PTS_COLUMNS:
+        names = _PTS_COLUMNS[ncols]
     else:
         names = ["x", "y", "z"][:ncols] + [f"col{i}" for i in range(3, ncols)]
     kept = [n for n in names if n not in SKIP_NAMES]
@@ -135,6 +142,17 @@ def read(path: Path, *, columns: list[str] | None = None, progress: bool | None 
     if first is not None:
         delimiter = _delimiter(first[1])
         tokens = _split(first[1], delimiter)
+        if len(tokens) == 1 and tokens[0].isdigit():  # a point count (Leica .pts), if data follow
+            following = next(lines, None)
+            if following is not None and len(_split(following[1], _delimiter(following[1]))) >= 3:
+                skiprows = first[0] + 1
+                first = following
+                delimiter = _delimiter(first[1])
+                tokens = _split(first[1], delimiter)
+            else:  # a one-column file: read it as it is (and fail on the missing y, z)
+                lines.close()
+                lines = _data_lines(path)
+                first = next(lines, None)
         if not all(_is_number(t) for t in tokens):
             header = [_header_name(t) for t in tokens]
             skiprows = first[0] + 1
