@@ -3,9 +3,12 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from . import _numba_cache
 from .cloud import PointCloud
 from .errors import LidarfxError
 from .io import read, write
+
+_numba_cache.check()  # before any kernel loads (none of the above has one): numba misses edits in other files
 
 __all__ = [
     "PointCloud",

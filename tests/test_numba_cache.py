@@ -1,0 +1,58 @@
+"""The guard that keeps numba's on-disk cache in step with edited sources (lidarfx._numba_cache)."""
+from __future__ import annotations
+
+import os
+
+from lidarfx import _numba_cache
+
+
+def _tree(tmp_path):
+    root = tmp_path / "pkg"
+    (root / "sub" / "__pycache__").mkdir(parents=True)
+    (root / "__pycache__").mkdir()
+    (root / "a.py").write_text("x = 1\n")
+    (root / "sub" / "b.py").write_text("y = 2\n")
+    return root
+
+
+def _cache_files(root):
+    return sorted(p.name for p in root.rglob("__pycache__/*.nb[ic]"))
+
+
+def _plant(root):
+    for d in (root / "__pycache__", root / "sub" / "__pycache__"):
+        (d / "k-1.py311.nbi").write_bytes(b"index")
+        (d / "k-1.py311.1.nbc").write_bytes(b"code")
+    (root / "__pycache__" / "a.cpython-311.pyc").write_bytes(b"pyc")  # not numba's: never touched
+
+
+def test_stale_kernels_are_deleted_only_when_a_source_changes(tmp_path):
+    root = _tree(tmp_path)
+    stamp = root / "__pycache__" / "key"
+    _plant(root)
+    assert _numba_cache.check(root, stamp) is True  # no record yet: whatever is cached is suspect
+    assert _cache_files(root) == [] and (root / "__pycache__" / "a.cpython-311.pyc").exists()
+    _plant(root)
+    assert _numba_cache.check(root, stamp) is False  # nothing changed: the cache stays
+    assert len(_cache_files(root)) == 4
+    st = (root / "sub" / "b.py").stat()
+    os.utime(root / "sub" / "b.py", ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))  # a callee edited
+    assert _numba_cache.check(root, stamp) is True
+    assert _cache_files(root) == []
+    _plant(root)
+    (root / "c.py").write_text("z = 3\n")  # a new module counts too
+    assert _numba_cache.check(root, stamp) is True and _cache_files(root) == []
+
+
+def test_an_unwritable_place_is_left_alone(tmp_path):
+    root = _tree(tmp_path)
+    _plant(root)
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    assert _numba_cache.check(root, blocked / "key") is False  # the record cannot be written: no exception
+
+
+def test_the_package_is_in_step_after_import():
+    import lidarfx  # noqa: F401  (the import ran the check)
+
+    assert _numba_cache.STAMP.read_text() == _numba_cache.fingerprint()
