@@ -50,9 +50,10 @@ def dip_from_normal(normal: Any) -> tuple[Any, Any]:
     if np.any(norm == 0):
         raise LidarfxError("zero-length normal")
     n = n / norm
-    n = np.where(n[:, 2:3] < 0, -n, n)
+    n = np.where(n[:, 2:3] < 0, -n, n) + 0.0  # + 0.0: a flipped -0.0 is 0.0 (atan2(-0, -0) = -180°)
     dip = np.degrees(np.arccos(np.clip(n[:, 2], -1.0, 1.0)))
     ddir = np.degrees(np.arctan2(n[:, 0], n[:, 1])) % 360.0
+    ddir = np.where(ddir >= 360.0, 0.0, ddir)  # a tiny negative angle mod 360 rounds to 360.0
     if single:
         return float(dip[0]), float(ddir[0])
     return dip, ddir
