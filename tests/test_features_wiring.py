@@ -7,10 +7,12 @@ default options, so these tests cover what they cannot see:
 * neighbourhood boundaries are inclusive (‖d‖ ≤ r, |dz| ≤ h) — on integer grids, where
   neighbours lie at exactly r: the sphere, the height-limited cylinder, ``NeighborIndex``,
   the horizontal shells of a multi-scale run, kNN ties (docs/features.md §1);
+* closed forms of an isotropic and of a coincident neighbourhood (NaN rules, docs §3.1);
 * the kNN radius that enters densities: d_K, or the cap R when fewer than K lie within R;
-* the Python options reach the kernels (``d_max``, ``hist_bins``, ``msac_threshold``, the
-  cylinder of MSAC, ``scanner`` on UTM coordinates) and ``stream_features`` passes every option on;
-* ``eigenvector1``'s documented sign rule;
+* the Python options reach the kernels (``d_max``, ``hist_bins``, ``msac_threshold``,
+  ``msac_iterations``, the cylinder of MSAC, ``scanner`` on UTM coordinates) and
+  ``stream_features`` passes every option on;
+* the 80° slope cap of ``echo_ratio_slope`` and ``eigenvector1``'s documented sign rule;
 * every ``lidarfx features`` option reaches the computation (``--d-max``, ``--height``,
   ``--convention``, ``--bins``, ``--seed``, ``--scanner``, ``-k``, ``-n cylinder``).
 """
@@ -25,7 +27,7 @@ import lidarfx
 from lidarfx import PointCloud
 from lidarfx.cli import main
 from lidarfx.errors import LidarfxError
-from lidarfx.features import compute_features, feature_arrays, stream_features
+from lidarfx.features import compute_features, stream_features
 from lidarfx.neighbors import NeighborIndex
 
 from reference_features import features as ref_features
@@ -298,6 +300,17 @@ def test_scanner_position_in_utm_coordinates():
     flat = np.c_[rng.uniform(0, 5, 2000), rng.uniform(0, 5, 2000), np.zeros(2000)] + UTM
     below = compute_features(PointCloud(flat), "normal_z", radius=0.5, scanner=UTM + [2.5, 2.5, -10.0])
     assert np.all(below["normal_z"] < -0.999)
+    # docs §3.3: the aspect is that of the up-facing normal, also with scanner-oriented normals:
+    # a plane sloping 30° towards azimuth 120°, scanned from below, keeps aspect 120°
+    s, a = math.radians(30), math.radians(120)
+    nrm = np.array([math.sin(s) * math.sin(a), math.sin(s) * math.cos(a), math.cos(s)])
+    xy = rng.uniform(0, 6, (3000, 2))
+    tilted = np.c_[xy, -(xy @ nrm[:2]) / nrm[2]] + UTM
+    t = compute_features(PointCloud(tilted), ["aspect", "normal_x", "normal_y", "normal_z"], radius=0.5,
+                         scanner=UTM + [3.0, 3.0, -50.0])
+    n = np.c_[t["normal_x"], t["normal_y"], t["normal_z"]]
+    np.testing.assert_allclose(n, np.broadcast_to(-nrm, n.shape), atol=1e-5)
+    np.testing.assert_allclose(t["aspect"], 120.0, atol=1e-3)
 
 
 def test_echo_ratio_slope_caps_the_slope_at_80_degrees():
@@ -391,9 +404,9 @@ def run_cli(src, tmp_path, *args):
     return lidarfx.read(out), lidarfx.read(src).xyz
 
 
-def at(xyz, x, y, z=200.0):
-    """Index of the file point nearest (x, y, z) in metres from the tile's corner."""
-    p = np.array([500000.0 + x, 5000000.0 + y, z])
+def at(xyz, x, y):
+    """Index of the ground point at (x, y) metres from the tile's corner."""
+    p = np.array([500000.0 + x, 5000000.0 + y, 200.0])
     return int(np.argmin(((xyz - p) ** 2).sum(1)))
 
 
@@ -428,7 +441,7 @@ def test_cli_d_max(levels_las, tmp_path):
     got, xyz = run_cli(levels_las, tmp_path, "-r", "0.35", "-f", "plane_inlier_ratio", "--d-max", "0.03")
     default, _ = run_cli(levels_las, tmp_path, "-r", "0.35", "-f", "plane_inlier_ratio")
     for x, y in ((2.6, 1.5), (2.5, 0.9)):
-        i = at(xyz, x, y, 200.04)
+        i = at(xyz, x, y)
         d = xyz - xyz[i]
         nb = xyz[(d**2).sum(1) <= 0.35**2]
         c = nb.mean(0)
@@ -447,7 +460,7 @@ def test_cli_convention(levels_las, tmp_path):
     pd, _ = run_cli(levels_las, tmp_path, "-r", "0.35", "-f", i_names, "--convention", "pdal")
     df, _ = run_cli(levels_las, tmp_path, "-r", "0.35", "-f", i_names)
     for x, y in ((1.5, 1.5), (2.6, 1.5), (1.5, 0.0)):
-        i = at(xyz, x, y, xyz[at(xyz, x, y), 2])
+        i = at(xyz, x, y)
         nb = xyz[((xyz - xyz[i]) ** 2).sum(1) <= 0.35**2]
         lam = np.clip(np.linalg.eigvalsh(np.cov(nb.T, bias=True))[::-1], 0, None)
         raw = -sum(v * math.log(v) for v in lam if v > 0)
