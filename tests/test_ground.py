@@ -224,7 +224,7 @@ def test_ground_eval_converts_units_as_the_ground_command_does(tmp_path, capsys)
     """ground-eval filters a copy without classes; it must keep the header's CRS (feet here)."""
     f = REAL / "autzen_trim.laz"  # US survey feet
     if not f.exists():
-        pytest.skip(f"missing {f}")
+        pytest.skip(f"{f.name} (US-feet ALS sample) is not in ../shared/data/real")
     c = lidarfx.read(f).subset(np.arange(30000))
     p = tmp_path / "autzen_part.laz"
     lidarfx.write(c, p)

@@ -143,16 +143,12 @@ def read(path: Path, *, columns: list[str] | None = None, progress: bool | None 
         delimiter = _delimiter(first[1])
         tokens = _split(first[1], delimiter)
         if len(tokens) == 1 and tokens[0].isdigit():  # a point count (Leica .pts), if data follow
-            following = next(lines, None)
+            following = next(lines, None)  # (else a one-column file: it fails on the missing y, z)
             if following is not None and len(_split(following[1], _delimiter(following[1]))) >= 3:
                 skiprows = first[0] + 1
                 first = following
                 delimiter = _delimiter(first[1])
                 tokens = _split(first[1], delimiter)
-            else:  # a one-column file: read it as it is (and fail on the missing y, z)
-                lines.close()
-                lines = _data_lines(path)
-                first = next(lines, None)
         if not all(_is_number(t) for t in tokens):
             header = [_header_name(t) for t in tokens]
             skiprows = first[0] + 1
