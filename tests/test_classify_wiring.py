@@ -543,3 +543,51 @@ def test_ignoring_a_code_renames_only_the_default_names():
     srcs = read_sources([_scene(1, size=20.0)])
     assert resolve_classes(srcs, None, np.array([64, 5])).spec() == "ground=2,building=6"
     assert resolve_classes(srcs, "2,5+64,6", np.array([64])).spec() == "ground=2,high vegetation=5,building=6"
+
+
+def test_absurd_radius_and_height_cap_do_not_overflow():
+    """A radius of 1e308 m raised OverflowError (π r² of the neighbour thinning); a cap of 1e308 m
+    warned about a float32 overflow. The radius now means 'no thinning', the cap 'no cap'."""
+    import warnings
+
+    from lidarfx.classify.pipeline import _cap32
+
+    assert _cap32(None) == np.inf and _cap32(1e308) == np.inf and _cap32(5.0) == np.float32(5.0)
+    cloud = _scene(3, size=30.0, density=8.0, extras=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        huge = LidarFeatures(features="planarity,height_above_ground", radii=[1e308], hag_cap=1e308,
+                             max_disc_points=125.0).fit_transform(cloud)
+        plain = LidarFeatures(features="planarity,height_above_ground", radii=[1e308], hag_cap=None,
+                              max_disc_points=None).fit_transform(cloud)
+    assert huge.shape == (len(cloud), 2) and np.array_equal(huge, plain, equal_nan=True)
+    # every point is in every neighbourhood: one planarity for the whole cloud
+    assert np.ptp(huge[:, 0]) < 1e-5 and np.isfinite(huge[:, 0]).all()
+    assert huge[:, 1].max() > 5.0  # the roofs and crowns keep their heights: no cap
+
+
+@pytest.mark.parametrize("seed", [-1, 2**32, 1.5, "x"])
+def test_bad_seed_is_a_lidarfx_error(seed):
+    """numpy's ValueError ('expected non-negative integer') was a traceback from `--seed -1`."""
+    with pytest.raises(LidarfxError, match="seed must be an integer"):
+        TrainConfig(seed=seed)
+    with pytest.raises(LidarfxError, match="seed must be an integer"):
+        evaluate([_scene(1, size=20.0, density=4.0, extras=False)], cv_seed=seed, config=TrainConfig(**FAST))
+    assert TrainConfig(seed=2**32 - 1).seed == 2**32 - 1
+
+
+def test_a_buffer_wider_than_the_data():
+    """Blocks beyond the data's span do not exist: a buffer of 1e308 m marks the same points as one
+    just over the span (it raised OverflowError, and 1e5 m looped for ages); CV then says which
+    option to change."""
+    rng = np.random.default_rng(4)
+    xy = rng.uniform(0, 50, (2000, 2)) + [7.7e5, 6.27e6]
+    folds, _ = block_folds(xy, 3, 10.0, 0)
+    ref = block_buffer_mask(xy, folds, 10.0, 75.0)  # > the 50 m span's diagonal: every other-fold point
+    assert np.array_equal(ref, folds[None, :] != np.arange(3)[:, None])
+    for b in (1e5, 1e308):
+        assert np.array_equal(block_buffer_mask(xy, folds, 10.0, b), ref)
+    cloud = _scene(11, size=40.0, density=6.0, extras=False)
+    with pytest.raises(LidarfxError, match=r"fold 0: its training part holds fewer than two classes \(.* use a smaller --buffer"):
+        evaluate(cloud, classes=CLASSES, cv=3, block_size=10.0, buffer=1e308, random_cv=False, bootstrap=0,
+                 config=TrainConfig(**FAST))

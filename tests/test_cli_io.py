@@ -134,6 +134,8 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
     "argv, message",
     [
         (["info", "{tmp}/missing.laz"], "file not found"),
+        (["info", "{tmp}/missing.e57"], "file not found"),  # not "unknown extension": the file is missing
+        (["features", "{tmp}", "{tmp}/b.laz"], "is a folder, not a point-cloud file"),
         (["convert", "{tmp}/a.xyz", "{tmp}/b.las", "--ascii"], "--ascii applies to .ply output only"),
         (["convert", "{tmp}/a.xyz", "{tmp}/a.xyz"], "is the input file"),
         (["convert", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),
@@ -142,8 +144,13 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         # outputs are checked before any work (the model does not exist: its error would come later)
         (["features", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),
         (["dtm", "{tmp}/a.xyz", "{tmp}/nodir/d.tif"], "output folder does not exist"),
+        (["dtm", "{tmp}/a.xyz", "{tmp}/d.tif", "--classify", "-r", "1e308"], "larger than any survey"),
+        (["dtm", "{tmp}/a.xyz", "{tmp}/d.tif", "--cell", "nan"], "cell must be a positive number"),  # unused, still checked
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.laz", "--dtm", "{tmp}/d.tif", "-r", "0"], "resolution must be a positive"),
         (["ground", "{tmp}/a.xyz", "{tmp}/b.las", "--dtm", "{tmp}/nodir/d.tif"], "output folder does not exist"),
         (["ground", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
+        (["ground-eval", "{tmp}/a.xyz", "--reference-class", "-1"], "must be a class code 0..255"),
+        (["ground-eval", "{tmp}/a.xyz", "--reference-class", "256"], "must be a class code 0..255"),
         (["segment", "{tmp}/a.xyz", "{tmp}/b.e57"], "unknown file extension"),
         (["classify", "predict", "{tmp}/a.xyz", "{tmp}/b.e57", "--model", "{tmp}/none.skops"], "unknown file extension"),
         (["classify", "predict", "{tmp}/a.xyz", "{tmp}/nodir/b.laz", "--model", "{tmp}/none.skops"],

@@ -586,3 +586,59 @@ def test_cli_errors_exit_2(scene_file, tmp_path, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "lidarfx: error:" in err
+
+
+def test_points_with_nan_coordinates(tmp_path):
+    """A point with a NaN coordinate is never ground, its height above ground is NaN and the DTM
+    ignores it; the other points get what they get without it (a traceback before)."""
+    rng = np.random.default_rng(5)
+    xy = rng.uniform(0, 20, (400, 2))
+    z = 0.1 * xy[:, 0] + 0.05 * xy[:, 1]
+    xyz = np.column_stack([xy, z])
+    xyz[::50, 2] += 3.0  # some objects
+    bad = np.vstack([xyz, [[np.nan, 5.0, 1.0], [5.0, np.inf, 1.0]]])
+    clean, dirty = PointCloud(xyz), PointCloud(bad)
+    m0, m1 = classify_ground(clean, progress=False), classify_ground(dirty, progress=False)
+    assert np.array_equal(m1[:400], m0) and not m1[400:].any()
+    h0, h1 = height_above_ground(clean, m0), height_above_ground(dirty, m1)
+    assert np.array_equal(h1[:400], h0) and np.isnan(h1[400:]).all()
+    assert np.allclose(h0[::50][1:], 3.0, atol=1e-4)
+    r0, r1 = dtm(clean, 2.0, ground=m0), dtm(dirty, 2.0, ground=m1)
+    assert r1.array.shape == r0.array.shape and r1.origin == r0.origin
+    assert np.array_equal(r1.array, r0.array)
+    # a NaN point labelled ground (class 2) does not poison the surface either
+    lab = PointCloud(bad, {"classification": np.where(np.append(m0, [True, True]), 2, 1).astype(np.uint8)})
+    assert np.array_equal(dtm(lab, 2.0).array, r0.array)
+    s = r0.sample(np.array([5.0, np.nan, 5.0]), np.array([5.0, 5.0, np.inf]))
+    assert np.isfinite(s[0]) and np.isnan(s[1:]).all()
+    assert np.isclose(s[0], 0.1 * 5 + 0.05 * 5, atol=0.05)
+    assert np.isnan(height_above_ground(dirty, r0)[400:]).all()
+    # the CLI: text output keeps the NaN point, with NaN height; the DTM is written
+    src = tmp_path / "nan.xyz"
+    src.write_text("1 2 3\nnan 2 3\n4 5 6\n2 6 3.1\n")
+    out, tif = tmp_path / "o.xyz", tmp_path / "d.tif"
+    assert main(["ground", str(src), str(out), "--hag", "--dtm", str(tif), "-q"]) == 0
+    rows = [line.split() for line in out.read_text().splitlines()[1:]]
+    assert rows[1][0] == "nan" and rows[1][3] == "1" and rows[1][4] == "nan"
+    assert tif.exists()
+
+
+def test_huge_window_is_capped_at_the_grid_diagonal():
+    """Openings with disks larger than the grid change nothing more: a window of 1e308 m gives the
+    result of a window just over the diagonal, at once (it ran for minutes before)."""
+    from lidarfx.ground.smrf import window_radius
+
+    assert window_radius(21.0, 1.0, 1000, 1000) == 21  # the default is untouched
+    assert window_radius(1e308, 1.0, 30, 40) == window_radius(1e9, 1.0, 30, 40) == 50  # ceil(hypot(29, 39)) + 1
+    assert window_radius(0.1, 1.0, 30, 40) == 1
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(0, 30, (3000, 2))
+    z = 2 * np.sin(xy[:, 0] / 6) + 0.05 * xy[:, 1]
+    roof = (np.abs(xy[:, 0] - 12) < 5) & (np.abs(xy[:, 1] - 15) < 6)
+    z[roof] += 6.0
+    cloud = PointCloud(np.column_stack([xy, z]))
+    diag = float(np.hypot(30, 30))
+    ref = classify_ground(cloud, window=2 * diag, progress=False)
+    assert not ref[roof].any() and ref[~roof].mean() > 0.9
+    assert np.array_equal(classify_ground(cloud, window=1e308, progress=False), ref)
+    assert np.array_equal(classify_ground(cloud, window=1.2 * diag, progress=False), ref)

@@ -99,3 +99,20 @@ def test_columns_sorted_by_z_and_bad_input():
         NeighborIndex(xyz, 0.0)
     with pytest.raises(LidarfxError):
         idx.knn(xyz[:2], 0)
+
+
+@pytest.mark.parametrize("xyz", [[[1.0, 2.0, 3.0]], [[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]], np.random.default_rng(3).random((40, 3))])
+def test_contiguous_z_column_tiny_clouds(xyz):
+    """One point (its z column is C-contiguous, a second kernel specialisation) and duplicates:
+    the index holds every point, sorted by z, and each point finds itself and its copies."""
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64)
+    idx = NeighborIndex(xyz, 0.5)
+    assert sorted(idx.order.tolist()) == list(range(len(xyz)))
+    g = idx.grid
+    for c in range(len(g.cstart)):
+        assert np.all(np.diff(g.pts[g.cstart[c]:g.cend[c], 2]) >= 0)
+    off, ind, _ = idx.query_radius(xyz, 1e-9)
+    same = (np.abs(xyz[:, None, :] - xyz[None, :, :]).max(axis=2) == 0).sum(axis=1)
+    assert np.array_equal(np.diff(off), same)
+    nn, d = idx.knn(xyz[:1], 1)
+    assert d[0, 0] == 0.0 and np.array_equal(xyz[nn[0, 0]], xyz[0])

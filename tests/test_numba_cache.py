@@ -56,3 +56,50 @@ def test_the_package_is_in_step_after_import():
     import lidarfx  # noqa: F401  (the import ran the check)
 
     assert _numba_cache.STAMP.read_text() == _numba_cache.fingerprint()
+
+
+def _kernels():
+    """Every numba-compiled function of the package: name -> (module path, parallel?, names it calls)."""
+    import ast
+    from pathlib import Path
+
+    import lidarfx
+
+    out = {}
+    for path in Path(lidarfx.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            for dec in node.decorator_list:
+                text = ast.unparse(dec)
+                if "jit" in text:
+                    calls = {c.func.id if isinstance(c.func, ast.Name) else getattr(c.func, "attr", None)
+                             for c in ast.walk(node) if isinstance(c, ast.Call)}
+                    out.setdefault(node.name, []).append((str(path), "parallel=True" in text, calls))
+    return out
+
+
+def test_no_kernel_calls_a_parallel_kernel():
+    """A cached kernel that calls a parallel=True kernel segfaults when it is loaded from numba's
+    disk cache (numba #8578; NeighborIndex of a one-point cloud crashed that way).  Parallel
+    kernels are called from Python only.  Names are matched across modules (conservative)."""
+    kernels = _kernels()
+    assert len(kernels) > 20 and any(p for defs in kernels.values() for _, p, _ in defs)
+    parallel = {name for name, defs in kernels.items() if any(p for _, p, _ in defs)}
+    bad = [f"{path}: {name} calls {sorted(calls & parallel)}"
+           for name, defs in kernels.items() for path, _, calls in defs if calls & parallel - {name}]
+    assert bad == []
+
+
+def test_one_point_index_from_the_disk_cache():
+    """The real path: two fresh processes build the index of one point (its z column is
+    C-contiguous: a kernel specialisation of its own); the second loads the kernels from disk."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np; from lidarfx.neighbors import NeighborIndex; "
+            "i = NeighborIndex(np.array([[1.0, 2.0, 3.0]]), 0.5); print(i.order.tolist())")
+    for _ in range(2):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-500:]
+        assert r.stdout.strip() == "[0]"

@@ -93,6 +93,11 @@ def test_generate_rejects_unknown_kind_and_bad_parameters():
                 {"noise": -0.1}, {"origin": [1, 2]}, {"seed": 1.5}):
         with pytest.raises(LidarfxError):
             synth.generate("plane", **bad)
+    # sizes that overflow to infinitely many points: a one-line error (an OverflowError before)
+    for bad in ({"density": 1e308}, {"radius": 1e308}, {"radius": 1e308, "sampling": "grid"},
+                {"density": 1e308, "sampling": "grid"}):
+        with pytest.raises(LidarfxError, match="at most 50,000,000"):
+            synth.generate("plane", **bad)
     with pytest.raises(LidarfxError):
         synth.edge(angle=0)
     with pytest.raises(LidarfxError):

@@ -345,7 +345,13 @@ def _knn_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, k, rmax, out_id
 # ----------------------------------------------------------------------------
 @nb.njit(cache=True)
 def _counting_sort(key, z, ncells):
-    """Order by column key (counting sort, O(n)), then by z inside each column."""
+    """Order by column key (counting sort, O(n)).  Returns the order, the z values in
+    that order and the run starts; :func:`_sort_runs_by_z` then sorts each run by z.
+
+    The caller runs :func:`_sort_runs_by_z` itself: a cached non-parallel kernel that
+    calls a ``parallel=True`` one segfaults when it is loaded from numba's disk cache
+    (numba issue #8578; seen here on a one-point cloud, whose z column is C-contiguous).
+    No kernel of lidarfx calls a parallel kernel (tests/test_numba_cache.py checks it)."""
     n = key.shape[0]
     start = np.zeros(ncells + 1, np.int64)
     for i in range(n):
@@ -360,8 +366,7 @@ def _counting_sort(key, z, ncells):
         order[fill[k]] = i
         zs[fill[k]] = z[i]
         fill[k] += 1
-    _sort_runs_by_z(order, zs, start)
-    return order
+    return order, zs, start
 
 
 @nb.njit(cache=True, parallel=True)
@@ -433,7 +438,9 @@ def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
     ncells = nx * ny
     dense = ncells <= 4 * n + 4096
     if dense:
-        order = _counting_sort(key, xyz[:, 2], ncells)  # z order = local z order
+        order, zs, start = _counting_sort(key, xyz[:, 2], ncells)
+        _sort_runs_by_z(order, zs, start)  # z order = local z order
+        del zs, start
     else:
         # sparse grid (huge extent for the cell size): sort by z, then stably by column
         oz = np.argsort(xyz[:, 2], kind="stable")

@@ -41,7 +41,7 @@ from .model import (
 )
 from .fastpredict import predict as fast_predict
 from .objects import building_class
-from .pipeline import CloudSample, balanced_sample, unit_to_metre
+from .pipeline import CloudSample, balanced_sample, check_seed, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_ids", "block_bootstrap",
            "block_buffer_mask",
@@ -247,7 +247,8 @@ def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buff
     by = np.floor(xy[:, 1] / s).astype(np.int64)
     ox, oy = xy[:, 0] - bx * s, xy[:, 1] - by * s  # offsets inside the own block, 0..s
     g = np.zeros(len(xy), np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
-    reach = math.ceil(buffer / s)
+    # blocks further away than the data's span in blocks do not exist (a huge buffer: no huge loop)
+    reach = min(math.ceil(buffer / s), int(max(np.ptp(bx), np.ptp(by))) + 1)
     bx, by = bx - bx.min() + reach, by - by.min() + reach
     w, h = int(bx.max()) + reach + 1, int(by.max()) + reach + 1
     key = (g * w + bx) * h + by
@@ -359,6 +360,11 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                 continue
             sa = tr[balanced_sample(y[tr], _aug_cap(config), config.seed + 1 + a)]
             Xf, yf = np.vstack([Xf, Xa[sa]]), np.concatenate([yf, y[sa]])
+        if len(np.unique(yf)) < 2:
+            near = "" if exclude is None else (
+                f" ({int((exclude[f] & (folds != f) & (y >= 0)).sum()):,} of its labelled points lie within the "
+                "buffer of the held-out part; use a smaller --buffer)")
+            raise LidarfxError(f"fold {int(f)}: its training part holds fewer than two classes{near}")
         est = config.fit_matrix(Xf, yf)
         pred = fast_predict(est, X[te]) if post is None else post(int(f), est, te)
         if out_pred is not None:
@@ -732,6 +738,7 @@ def evaluate(
     cfg = config or TrainConfig(**params)
     if config is not None and params:
         raise LidarfxError("give either config= or keyword parameters, not both")
+    cv_seed = check_seed(cv_seed)
     buf = default_buffer(cfg) if buffer is None else float(buffer)
     if not (buf >= 0 and math.isfinite(buf)):
         raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")

@@ -31,6 +31,7 @@ from .pipeline import (
     CloudSample,
     LidarFeatures,
     balanced_sample,
+    check_seed,
     feature_list,
     make_classifier,
     make_imputer,
@@ -165,6 +166,7 @@ class TrainConfig:
 
         self.min_building_area = check_area(self.min_building_area)
         self.max_multi_return_share = check_share(self.max_multi_return_share)
+        self.seed = check_seed(self.seed)
         if self.max_per_class is not None and int(self.max_per_class) < 1:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
         make_classifier(self.classifier)  # validates the kind

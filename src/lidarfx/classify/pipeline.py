@@ -422,8 +422,8 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 if key not in cache:
                     limit = None
                     if self.max_disc_points is not None and rs:
-                        limit = float(self.max_disc_points) / (math.pi * rs[0] ** 2)
-                    cache[key] = thinning_mask(xyz, limit)
+                        limit = float(self.max_disc_points) / (math.pi * rs[0] * rs[0])  # float: no OverflowError
+                    cache[key] = thinning_mask(xyz, limit if limit else None)  # 0 for absurd radii: no thinning
                 keep = cache[key]
                 req = Request(tuple(slots), ())
                 held = cache.get("index")
@@ -478,7 +478,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 else:
                     v = sel(self._hag(cloud, unit, cache))
                 if self.hag_cap is not None:
-                    v = np.minimum(v, np.float32(self.hag_cap))
+                    v = np.minimum(v, _cap32(self.hag_cap))
             elif n in ("number_of_returns", "return_number", "intensity"):
                 v = sel(cloud[n])
             elif n == "intensity_norm":
@@ -495,7 +495,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     _warn_broken_pulses(cloud, pid, sample.name)
                     cache[key] = pulse_heights(cloud, pid)
                 v = sel(cache[key][0 if n == "pulse_above" else 1]) * np.float32(unit)
-                lim = np.float32(self.hag_cap if self.hag_cap is not None else np.inf)
+                lim = _cap32(self.hag_cap)
                 v = np.clip(v, -lim, lim)
             elif n == "z":
                 key = ("zmin", id(cloud))
@@ -548,6 +548,25 @@ def unit_to_metre(cloud: PointCloud) -> float:
 
     u = (cloud_crs(cloud) or {}).get("unit_to_metre")
     return float(u) if u and u > 0 else 1.0
+
+
+def check_seed(seed: Any) -> int:
+    """A random seed as numpy and scikit-learn take it: an integer in 0 .. 2**32 - 1."""
+    try:
+        v = int(seed)
+        ok = v == seed and 0 <= v < 2**32
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise LidarfxError(f"seed must be an integer from 0 to {2**32 - 1}, got {seed!r}")
+    return v
+
+
+def _cap32(cap: float | None) -> np.float32:
+    """A height cap as float32; None, and caps beyond float32's range, are +inf (no overflow warning)."""
+    if cap is None or not float(cap) < float(np.finfo(np.float32).max):
+        return np.float32(np.inf)
+    return np.float32(cap)
 
 
 def thinning_mask(xyz: np.ndarray, max_density: float | None, seed: int = 0) -> np.ndarray | None:

@@ -73,7 +73,10 @@ def _add_params(p) -> None:
 
 
 def _params(args) -> dict:
-    return {
+    """The SMRF options, checked at once (also where they go unused: ``dtm`` without ``--classify``)."""
+    from ..ground import _check_params
+
+    p = {
         "cell": args.cell,
         "slope": args.slope,
         "window": args.window,
@@ -81,8 +84,9 @@ def _params(args) -> dict:
         "scalar": args.scalar,
         "edge_step": args.edge_step,
         "edge_share": args.edge_share,
-        "last_returns": not args.all_returns,
     }
+    _check_params(p)
+    return {**p, "last_returns": not args.all_returns}
 
 
 def register(sub) -> None:
@@ -154,16 +158,19 @@ def run_ground(args) -> int:
         dtm,
         height_above_ground,
     )
+    from ..ground.dtm import check_resolution
 
     check_output(args.input, args.output)
+    params = _params(args)
     if args.dtm:
         _check_raster_path(args.dtm)
+        check_resolution(args.resolution)
     progress = False if args.quiet else None
     t0 = time.perf_counter()
     cloud = io.read(args.input, progress=progress)
     t1 = time.perf_counter()
-    mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **_params(args))
-    out = apply_ground_classification(cloud, mask, ignore_classes=args.ignore_classes, **_params(args))
+    mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **params)
+    out = apply_ground_classification(cloud, mask, ignore_classes=args.ignore_classes, **params)
     t2 = time.perf_counter()
     if args.hag:
         out["height_above_ground"] = height_above_ground(out, mask)
@@ -185,7 +192,7 @@ def run_ground(args) -> int:
         "points": len(out),
         "ground_points": int(mask.sum()),
         "ground_share": round(float(mask.mean()), 6) if len(out) else None,
-        "parameters": {**_params(args), "ignore_classes": args.ignore_classes},
+        "parameters": {**params, "ignore_classes": args.ignore_classes},
         "dtm": None if raster is None else {"path": args.dtm, "shape": list(raster.shape), "resolution": raster.resolution},
         "seconds": {
             "read": round(t1 - t0, 3),
@@ -238,8 +245,12 @@ def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict,
 def run_eval(args) -> int:
     import numpy as np
 
+    from ..errors import LidarfxError
+
     progress = False if args.quiet else None
     params = _params(args)
+    if not 0 <= args.reference_class <= 255:
+        raise LidarfxError(f"--reference-class must be a class code 0..255, got {args.reference_class}")
     rows = [evaluate_file(f, args.reference_class, args.ignore_classes, params, progress) for f in args.inputs]
     mean = {k: float(np.mean([r[k] for r in rows])) for k in ("type_i", "type_ii", "total")}
     if args.json:
@@ -263,13 +274,16 @@ def run_dtm(args) -> int:
     from .. import io
     from ..errors import LidarfxError
     from ..ground import classify_ground, dtm
+    from ..ground.dtm import check_resolution
 
     _check_raster_path(args.output)
+    params = _params(args)
+    check_resolution(args.resolution)
     progress = False if args.quiet else None
     t0 = time.perf_counter()
     cloud = io.read(args.input, progress=progress)
     if args.classify:
-        mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **_params(args))
+        mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **params)
     else:
         if "classification" not in cloud:
             raise LidarfxError(f"{args.input}: no classification; use --classify to run the ground filter")

@@ -124,7 +124,8 @@ def classify_ground(
     numpy.ndarray
         Boolean mask, ``True`` = ground.
     """
-    from .smrf import smrf
+    from .grid import GridSpec
+    from .smrf import smrf, window_radius
 
     params = {"cell": float(cell), "slope": float(slope), "window": float(window),
               "threshold": float(threshold), "scalar": float(scalar),
@@ -154,7 +155,8 @@ def classify_ground(
             f"the cloud spans {ext[0]:.0f} x {ext[1]:.0f} m: {cells:.3g} cells of {cell} m is too many; "
             "cut it into tiles or use a larger cell"
         )
-    radius = max(1, int(round(window / cell)))
+    spec = GridSpec(local[:, :2], cell)
+    radius = window_radius(window, cell, spec.nx, spec.ny)
     with _progress.bar("ground (SMRF)", radius, _progress.wanted(progress, len(idx))) as advance:
         ground, _ = smrf(local, advance=advance, **params)
     mask[idx] = ground

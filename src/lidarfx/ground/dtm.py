@@ -54,6 +54,22 @@ def ground_mask_of(cloud: PointCloud, ground: Any = None) -> np.ndarray:
     return mask
 
 
+MAX_RESOLUTION = 1e9
+"""Largest DTM cell (map units) :func:`dtm` accepts."""
+
+
+def check_resolution(resolution: Any) -> None:
+    """Refuse a DTM cell size that is not a positive number up to :data:`MAX_RESOLUTION`."""
+    try:
+        ok = float(resolution) > 0 and math.isfinite(float(resolution))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise LidarfxError(f"resolution must be a positive number, got {resolution!r}")
+    if float(resolution) > MAX_RESOLUTION:  # squared distances to such cell centres overflow
+        raise LidarfxError(f"resolution {resolution:g} is larger than any survey (at most {MAX_RESOLUTION:g} map units)")
+
+
 def _as_cloud(source: Any) -> tuple[np.ndarray, np.ndarray | None, PointCloud | None]:
     if isinstance(source, PointCloud):
         return source.xyz, None, source
@@ -96,20 +112,20 @@ def dtm(
         outside the convex hull of the ground points take the height of the
         nearest ground point (so every cell has a value).
     """
-    if not (resolution > 0 and math.isfinite(resolution)):
-        raise LidarfxError(f"resolution must be a positive number, got {resolution!r}")
+    check_resolution(resolution)
     xyz, mask, cloud = _as_cloud(source)
     if cloud is not None:
         mask = ground_mask_of(cloud, ground)
         if crs is None:
             crs = cloud_crs(cloud)
     assert mask is not None
-    g = xyz[mask]
+    finite = np.isfinite(xyz).all(axis=1)  # points with NaN / infinite coordinates are left out
+    g = xyz[mask & finite]
     if len(g) == 0:
         raise LidarfxError("no ground points: cannot build a DTM (classify the ground first)")
     if bounds is None:
-        lo = xyz.min(axis=0)[:2]
-        hi = xyz.max(axis=0)[:2]
+        lo = xyz[finite].min(axis=0)[:2]
+        hi = xyz[finite].max(axis=0)[:2]
     else:
         lo = np.array(bounds[:2], dtype=np.float64)
         hi = np.array(bounds[2:], dtype=np.float64)
@@ -153,7 +169,8 @@ def height_above_ground(cloud: Any, ground: Any = None) -> np.ndarray:
     The ground surface is the Delaunay TIN of the ground points (linear
     interpolation in the triangle under the point); outside the convex hull of
     the ground points the nearest ground point's height is used.  Ground
-    points themselves get ≈ 0.  NaN everywhere when there is no ground point.
+    points themselves get ≈ 0.  NaN everywhere when there is no ground point, and
+    NaN for points with NaN or infinite coordinates (they are never ground).
     """
     if isinstance(cloud, PointCloud):
         xyz = cloud.xyz
@@ -171,9 +188,14 @@ def height_above_ground(cloud: Any, ground: Any = None) -> np.ndarray:
         mask = np.asarray(ground)
         if mask.dtype != bool or mask.shape != (len(xyz),):
             raise LidarfxError(f"ground must be a boolean mask of length {len(xyz)}")
+    finite = np.isfinite(xyz).all(axis=1)
+    mask = mask & finite
     if not mask.any():
         return np.full(len(xyz), np.nan, dtype=np.float32)
-    origin = xyz.min(axis=0)
-    local = xyz - origin
-    surf = tin_interpolate(local[mask, :2], local[mask, 2], local[:, :2], max_points=TIN_TILE_POINTS)
-    return (local[:, 2] - surf).astype(np.float32)
+    if finite.all():
+        local = xyz - xyz.min(axis=0)
+        surf = tin_interpolate(local[mask, :2], local[mask, 2], local[:, :2], max_points=TIN_TILE_POINTS)
+        return (local[:, 2] - surf).astype(np.float32)
+    out = np.full(len(xyz), np.nan, dtype=np.float32)
+    out[finite] = height_above_ground(xyz[finite], ground=mask[finite])
+    return out

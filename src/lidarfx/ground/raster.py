@@ -94,10 +94,13 @@ class Raster:
         """Bilinear value at map coordinates (cell values sit at cell centres).
 
         Points outside the outer cell centres take the edge values; NaN cells
-        propagate NaN.
+        propagate NaN, and so do NaN or infinite coordinates.
         """
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
+        bad = ~(np.isfinite(x) & np.isfinite(y))
+        if bad.any():
+            x, y = np.where(bad, self.origin[0], x), np.where(bad, self.origin[1], y)
         rows, cols = self.array.shape
         a = self.array.astype(np.float64)
         fx = np.clip((x - self.origin[0]) / self.resolution - 0.5, 0.0, cols - 1.0)
@@ -109,7 +112,10 @@ class Raster:
         tx, ty = fx - j0, fy - i0
         top = a[i0, j0] * (1 - tx) + a[i0, j1] * tx
         bot = a[i1, j0] * (1 - tx) + a[i1, j1] * tx
-        return top * (1 - ty) + bot * ty
+        out = top * (1 - ty) + bot * ty
+        if bad.any():
+            out[bad] = np.nan
+        return out
 
     # ---------------------------------------------------------------- writing
     def write(self, path: str | os.PathLike, *, engine: str = "auto") -> Path:

@@ -26,6 +26,7 @@ Steps (paper section numbers in brackets):
 """
 from __future__ import annotations
 
+import math
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -35,7 +36,7 @@ from scipy import ndimage
 from .params import DEFAULTS
 from .grid import GridSpec, bilinear, cell_index, gradient_slope, inpaint, min_surface, open_disk
 
-__all__ = ["progressive_objects", "provisional_dtm", "smrf", "SmrfSurface"]
+__all__ = ["progressive_objects", "provisional_dtm", "smrf", "SmrfSurface", "window_radius"]
 
 LOW_OUTLIER_SLOPE = 5.0
 """Slope of the low-outlier pass (on the negated minimum surface), as PDAL."""
@@ -98,6 +99,14 @@ def step_check(obj: np.ndarray, zfill: np.ndarray, step: float, share: float) ->
     return obj & is_object[lab]
 
 
+def window_radius(window: float, cell: float, nx: int, ny: int) -> int:
+    """The largest opening radius (cells) SMRF runs: ``window / cell``, but no more than the
+    grid's diagonal: a disk that covers the whole grid opens it to its minimum, and larger
+    disks flag nothing more (so a huge ``window`` gives the same result, quickly)."""
+    r = max(1, int(round(min(window / cell, 1e12))))
+    return min(r, int(math.ceil(math.hypot(nx - 1, ny - 1))) + 1)
+
+
 def provisional_dtm(
     xyz: np.ndarray,
     *,
@@ -119,7 +128,7 @@ def provisional_dtm(
         z2 = zmin.copy()
         z2[low] = np.nan
         zfill = inpaint(z2, spec)
-    radius = max(1, int(round(window / cell)))
+    radius = window_radius(window, cell, spec.nx, spec.ny)
     obj = progressive_objects(zfill, cell, slope, radius, advance)
     obj = step_check(obj, zfill, edge_step, edge_share)
     kept = ~(obj | empty | low)

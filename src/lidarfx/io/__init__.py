@@ -106,12 +106,13 @@ def check_output_path(path: str | os.PathLike) -> Path:
 
 def _input_module(path: Path):
     """The format module for an existing input file (else a one-line error)."""
-    module = _format_module(path)
     if not path.exists():
         raise LidarfxError(f"file not found: {path}")
+    if path.is_dir():
+        raise LidarfxError(f"{path} is a folder, not a point-cloud file")
     if not path.is_file():
         raise LidarfxError(f"not a file: {path}")
-    return module
+    return _format_module(path)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -85,12 +85,13 @@ def check_origin(origin: Any) -> np.ndarray:
 
 
 def _count(measure: float, density: float) -> int:
-    n = int(round(measure * density))
-    if n > MAX_POINTS:
+    m = measure * density
+    if not m <= MAX_POINTS:  # also inf (a density or radius of 1e308) and NaN
         raise LidarfxError(
-            f"density {density:g} would give {n:,} points in one primitive; lower the density"
+            f"density {density:g} on a primitive of size {measure:g} would give {m:.3g} points (at most "
+            f"{MAX_POINTS:,}); lower the density or the size"
         )
-    return n
+    return int(round(m))
 
 
 # -------------------------------------------------------------- orientation
@@ -131,9 +132,10 @@ def rotate_z(xyz: np.ndarray, angle_deg: float) -> np.ndarray:
 # ----------------------------------------------------------------- sampling
 def grid_1d(lo: float, hi: float, step: float) -> np.ndarray:
     """Cell centres of ``round((hi-lo)/step)`` equal cells covering [lo, hi]."""
-    m = max(1, int(round((hi - lo) / step)))
-    if m > MAX_POINTS:
-        raise LidarfxError(f"grid of {m:,} cells per axis; lower the density")
+    f = (hi - lo) / step
+    if not f <= MAX_POINTS:  # also inf and NaN
+        raise LidarfxError(f"grid of {f:.3g} cells per axis (at most {MAX_POINTS:,}); lower the density or the size")
+    m = max(1, int(round(f)))
     return lo + (np.arange(m) + 0.5) * ((hi - lo) / m)
 
 
