@@ -111,7 +111,7 @@ def test_contiguous_z_column_tiny_clouds(xyz):
     g = idx.grid
     for c in range(len(g.cstart)):
         assert np.all(np.diff(g.pts[g.cstart[c]:g.cend[c], 2]) >= 0)
-    off, ind, _ = idx.query_radius(xyz, 1e-9)
+    off, _, _ = idx.query_radius(xyz, 1e-9)
     same = (np.abs(xyz[:, None, :] - xyz[None, :, :]).max(axis=2) == 0).sum(axis=1)
     assert np.array_equal(np.diff(off), same)
     nn, d = idx.knn(xyz[:1], 1)

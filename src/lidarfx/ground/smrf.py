@@ -103,7 +103,7 @@ def window_radius(window: float, cell: float, nx: int, ny: int) -> int:
     """The largest opening radius (cells) SMRF runs: ``window / cell``, but no more than the
     grid's diagonal: a disk that covers the whole grid opens it to its minimum, and larger
     disks flag nothing more (so a huge ``window`` gives the same result, quickly)."""
-    r = max(1, int(round(min(window / cell, 1e12))))
+    r = max(1, round(min(window / cell, 1e12)))
     return min(r, int(math.ceil(math.hypot(nx - 1, ny - 1))) + 1)
 
 
