@@ -591,3 +591,38 @@ def test_a_buffer_wider_than_the_data():
     with pytest.raises(LidarfxError, match=r"fold 0: its training part holds fewer than two classes \(.* use a smaller --buffer"):
         evaluate(cloud, classes=CLASSES, cv=3, block_size=10.0, buffer=1e308, random_cv=False, bootstrap=0,
                  config=TrainConfig(**FAST))
+
+
+def test_cli_reads_headerless_text_with_columns(tmp_path, capsys):
+    """ISPRS-style text without a header: `--columns` names its columns for train, predict,
+    evaluate (also with --model and --test), ground-eval and dtm (those read only LAS-like input
+    before: the 4th column was 'col3', so no classification)."""
+    cloud = _scene(21, size=30.0, density=8.0, extras=False)
+    xyz, cls = cloud.xyz, np.asarray(cloud["classification"])
+    path = tmp_path / "scene.txt"
+    np.savetxt(path, np.column_stack([xyz, cls]), fmt="%.3f %.3f %.3f %d")
+    spec = ["--columns", "x,y,z,classification"]
+    fast = ["-f", "eigen,plane,height_above_ground", "-r", "1", "-r", "2", "--classifier", "rf",
+            "--n-estimators", "10", "--terrain-augment", "0", "--classes", CLASSES, "-q"]
+    model = tmp_path / "m.skops"
+    assert main(["classify", "train", str(path), "--model", str(model), *fast]) == 2
+    assert "has no classification" in capsys.readouterr().err
+    assert main(["classify", "train", str(path), "--model", str(model), *fast, *spec]) == 0
+    files = load_model(model).meta["training"]["files"]
+    assert [f["name"] for f in files] == [str(path)] and files[0]["points"] == len(cloud)
+    out = tmp_path / "p.laz"
+    assert main(["classify", "predict", str(path), str(out), "--model", str(model), "-q", *spec]) == 0
+    pred = np.asarray(lidarfx.read(out)["classification"])
+    assert len(pred) == len(cloud) and (pred == cls).mean() > 0.9
+    capsys.readouterr()
+    assert main(["classify", "evaluate", str(path), "--model", str(model), "--json", "-q", "--bootstrap", "0",
+                 *spec]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["sections"]["test"]["metrics"]["points"] == len(cloud)
+    assert main(["classify", "evaluate", str(path), "--test", str(path), "--json", "-q", "--bootstrap", "0",
+                 *fast, *spec]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["sections"]["test"]["metrics"]["points"] == len(cloud)
+    assert main(["ground-eval", str(path), "--json", "-q", *spec]) == 0
+    assert json.loads(capsys.readouterr().out)["files"][0]["n_points"] == len(cloud)
+    assert main(["dtm", str(path), str(tmp_path / "d.asc"), "-q", *spec]) == 0  # class 2 from the 4th column

@@ -211,3 +211,15 @@ def test_check_output_path(tmp_path):
         check_output_path(tmp_path / "x.e57")
     with pytest.raises(LidarfxError, match="output folder does not exist"):
         check_output_path(tmp_path / "no" / "x.las")
+
+
+def test_info_with_a_column_spec(tmp_path, capsys):
+    """`info --columns` reads headerless text as the other commands do; the file keeps its typed name."""
+    path = tmp_path / "pts.txt"
+    path.write_text("1 2 3 2\n4 5 6 6\n7 8 9 2\n")
+    assert main(["info", str(path), "--columns", "x,y,z,classification", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["file"] == str(path) and res["points"] == 3
+    assert [(c["code"], c["count"]) for c in res["classes"]] == [(2, 2), (6, 1)]
+    assert main(["info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["classes"] is None  # col3 is no classification

@@ -33,6 +33,35 @@ def check_output(input_path: str, output_path: str) -> None:
     check_output_path(output_path)
 
 
+COLUMNS_HELP = "column spec for text input, e.g. x,y,z,intensity,classification (default: its header line)"
+
+
+def add_columns(p) -> None:
+    """The ``--columns`` option of a command that reads point clouds."""
+    p.add_argument("--columns", default=None, help=COLUMNS_HELP)
+
+
+def columns_of(args) -> list[str] | None:
+    """The ``--columns`` spec as a list (None when not given)."""
+    return args.columns.split(",") if getattr(args, "columns", None) else None
+
+
+def read_clouds(paths, args, progress=None):
+    """Paths for the library to read, or, with ``--columns``, the clouds read with that spec
+    (named as the user typed them, like files read by the library)."""
+    cols = columns_of(args)
+    if paths is None or cols is None:
+        return paths
+    from .. import io
+
+    out = []
+    for p in paths:
+        cloud = io.read(p, columns=cols, progress=progress)
+        cloud.meta["name"] = str(p)
+        out.append(cloud)
+    return out
+
+
 def read_input(args):
     """Read ``args.input`` for a command that writes ``args.output``.
 
@@ -44,8 +73,7 @@ def read_input(args):
 
     check_output(args.input, args.output)
     progress = False if args.quiet else None
-    columns = args.columns.split(",") if getattr(args, "columns", None) else None
-    return io.read(args.input, columns=columns, progress=progress), progress
+    return io.read(args.input, columns=columns_of(args), progress=progress), progress
 
 
 def check_picture_path(path: str) -> None:

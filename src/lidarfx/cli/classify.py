@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from .. import _json
-from ._args import check_output, check_picture_path, xyz
+from ._args import add_columns, check_output, check_picture_path, columns_of, read_clouds, xyz
 
 EPILOG = """examples:
   # train on labelled tiles (ground / vegetation 3+4+5 / building; other classes ignored)
@@ -157,6 +157,7 @@ def register(sub) -> None:
     t.add_argument("files", nargs="+", help="labelled training clouds")
     t.add_argument("-m", "--model", required=True, help="output model file (.skops)")
     _add_train_options(t)
+    add_columns(t)
     _add_common(t)
     t.set_defaults(func=run_train)
 
@@ -182,6 +183,7 @@ def register(sub) -> None:
                     help="object-size rule for buildings (see 'classify train --help'); 0 = off; default: the model's")
     pr.add_argument("--max-multi-return-share", type=float, default=None, metavar="S",
                     help="see-through test of that rule (see 'classify train --help'); 1 = off; default: the model's")
+    add_columns(pr)
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
@@ -226,6 +228,7 @@ def register(sub) -> None:
                         "also a plan-view error map errors_<file>.png per test file; importance.png and "
                         "backward_elimination.png with those options")
     g = _add_train_options(e)
+    add_columns(e)
     _add_common(e)
     # what --model cannot use: the options that configure a training or a cross-validation
     # (g._group_actions: argparse's list of the "model" group's options)
@@ -300,7 +303,8 @@ def run_train(args) -> int:
     check_output_folder(args.model)  # before the training, not after it
     say = _log(args)
     t0 = time.perf_counter()
-    model = train(args.files, classes=args.classes, ignore=_ignore(args), config=_config(args), log=say)
+    model = train(read_clouds(args.files, args), classes=args.classes, ignore=_ignore(args), config=_config(args),
+                  log=say)
     model.save(args.model)
     summary = {"model": args.model, "classes": model.classes.spec(), "features": len(model.feature_names),
                "radii": model.radii, "classifier": model.meta["config"]["classifier"],
@@ -331,7 +335,7 @@ def run_predict(args) -> int:
         model.features.precomputed = True
     if args.ground:
         model.features.ground = args.ground
-    cloud = io.read(args.input, progress=False if args.quiet else None)
+    cloud = io.read(args.input, columns=columns_of(args), progress=False if args.quiet else None)
     cloud.meta["name"] = args.input  # messages name the file as the user typed it
     model.check(cloud, args.input)
     t1 = time.perf_counter()
@@ -466,7 +470,7 @@ def run_evaluate(args) -> int:
         if args.precomputed:
             model.features.precomputed = True
         _rule_overrides(model, args)
-        sec = evaluate_model(model, args.files, log=say, maps_dir=args.out, by_slope=args.by_slope,
+        sec = evaluate_model(model, read_clouds(args.files, args), log=say, maps_dir=args.out, by_slope=args.by_slope,
                              bootstrap=args.bootstrap, ci_block_size=args.spatial_blocks or 20.0)
         report = {"lidarfx_version": model.meta.get("lidarfx_version"), "layout": sec["metrics"]["layout"],
                   "config": model.meta["config"], "features": model.feature_names,
@@ -482,7 +486,8 @@ def run_evaluate(args) -> int:
         if cv is not None and cv < 2:
             raise LidarfxError("--cv needs at least 2 folds")
         report = evaluate(
-            args.files, test=args.test, cv=cv, block_size=args.spatial_blocks or None,
+            read_clouds(args.files, args), test=read_clouds(args.test, args), cv=cv,
+            block_size=args.spatial_blocks or None,
             buffer=args.buffer,
             random_cv=not args.no_random_folds, leave_one_out=args.leave_one_out, classes=args.classes,
             ignore=_ignore(args), config=_config(args), importance=args.importance,

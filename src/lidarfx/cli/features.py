@@ -6,7 +6,7 @@ import sys
 import time
 
 from .. import _json
-from ._args import read_input, xyz
+from ._args import add_columns, read_input, xyz
 
 EPILOG = """examples:
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
@@ -46,7 +46,7 @@ def register(sub) -> None:
     p.add_argument("--d-max", type=float, default=0.10, help="plane inlier distance (coordinate units), default 0.10")
     p.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
     p.add_argument("--seed", type=int, default=0, help="seed of the MSAC generator")
-    p.add_argument("--columns", default=None, help="column spec for text input, e.g. x,y,z,intensity")
+    add_columns(p)
     p.add_argument("--list", action="store_true", help="list feature groups and names, then exit")
     p.add_argument("--json", action="store_true", help="print a JSON summary (timings, NaN shares) on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")

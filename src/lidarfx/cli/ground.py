@@ -6,7 +6,7 @@ import sys
 import time
 
 from .. import _json
-from ._args import check_output
+from ._args import add_columns, check_output, columns_of
 
 GROUND_EPILOG = """examples:
   lidarfx ground in.laz out.laz                        # class 2 = ground, 1 = other (noise 7/18 kept)
@@ -103,6 +103,7 @@ def register(sub) -> None:
     p.add_argument("--hag", action="store_true", help="add the height_above_ground attribute")
     p.add_argument("--dtm", default=None, metavar="RASTER", help="also write a DTM raster (.tif or .asc)")
     p.add_argument("-r", "--resolution", type=float, default=1.0, help="DTM cell (map units), default 1.0")
+    add_columns(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
     p.set_defaults(func=run_ground)
@@ -117,6 +118,7 @@ def register(sub) -> None:
     e.add_argument("inputs", nargs="+", metavar="IN", help="labelled point cloud(s)")
     e.add_argument("--reference-class", type=int, default=2, help="ground class of the reference (default 2)")
     _add_params(e)
+    add_columns(e)
     e.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     e.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     e.set_defaults(func=run_eval)
@@ -133,6 +135,7 @@ def register(sub) -> None:
     d.add_argument("-r", "--resolution", type=float, default=1.0, help="cell (map units), default 1.0")
     d.add_argument("--classify", action="store_true", help="run the ground filter first (else class 2 is ground)")
     _add_params(d)
+    add_columns(d)
     d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
     d.set_defaults(func=run_dtm)
@@ -167,7 +170,7 @@ def run_ground(args) -> int:
         check_resolution(args.resolution)
     progress = False if args.quiet else None
     t0 = time.perf_counter()
-    cloud = io.read(args.input, progress=progress)
+    cloud = io.read(args.input, columns=columns_of(args), progress=progress)
     t1 = time.perf_counter()
     mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **params)
     out = apply_ground_classification(cloud, mask, ignore_classes=args.ignore_classes, **params)
@@ -214,8 +217,10 @@ def run_ground(args) -> int:
     return 0
 
 
-def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict, progress=None) -> dict:
-    """Read ``path``, hide its classes from the filter, score against ``reference_class``."""
+def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict, progress=None,
+                  columns: list[str] | None = None) -> dict:
+    """Read ``path`` (text with the ``columns`` spec), hide its classes from the filter, score
+    against ``reference_class``."""
     import numpy as np
 
     from .. import io
@@ -223,7 +228,7 @@ def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict,
     from ..errors import LidarfxError
     from ..ground import classify_ground, ground_errors
 
-    cloud = io.read(path, progress=progress)
+    cloud = io.read(path, columns=columns, progress=progress)
     if "classification" not in cloud:
         raise LidarfxError(f"{path}: no classification to use as reference")
     cls = np.asarray(cloud["classification"])
@@ -251,7 +256,8 @@ def run_eval(args) -> int:
     params = _params(args)
     if not 0 <= args.reference_class <= 255:
         raise LidarfxError(f"--reference-class must be a class code 0..255, got {args.reference_class}")
-    rows = [evaluate_file(f, args.reference_class, args.ignore_classes, params, progress) for f in args.inputs]
+    rows = [evaluate_file(f, args.reference_class, args.ignore_classes, params, progress, columns_of(args))
+            for f in args.inputs]
     mean = {k: float(np.mean([r[k] for r in rows])) for k in ("type_i", "type_ii", "total")}
     if args.json:
         _json.dump(
@@ -281,7 +287,7 @@ def run_dtm(args) -> int:
     check_resolution(args.resolution)
     progress = False if args.quiet else None
     t0 = time.perf_counter()
-    cloud = io.read(args.input, progress=progress)
+    cloud = io.read(args.input, columns=columns_of(args), progress=progress)
     if args.classify:
         mask = classify_ground(cloud, ignore_classes=args.ignore_classes, progress=progress, **params)
     else:

@@ -5,6 +5,7 @@ import argparse
 from typing import Any
 
 from .. import _json
+from ._args import add_columns, read_clouds
 
 EPILOG = """examples:
   lidarfx info scan.laz                  # a table per file
@@ -30,6 +31,7 @@ def register(subparsers: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="LAS/LAZ, PLY, text or NumPy point clouds")
+    add_columns(p)
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.set_defaults(func=run)
 
@@ -46,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
             raise LidarfxError("give one model file at a time (or use: lidarfx classify info MODEL)")
         return run_info(argparse.Namespace(model=args.files[0], json=args.json))
-    results = [info(f) for f in args.files]
+    results = [{**info(c), "file": str(f)} for f, c in zip(args.files, read_clouds(args.files, args))]
     if args.json:
         print(_json.dumps(results[0] if len(results) == 1 else results, indent=2))
         return 0

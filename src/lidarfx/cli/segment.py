@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from .. import _json
-from ._args import check_picture_path, read_input, xyz
+from ._args import add_columns, check_picture_path, read_input, xyz
 
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
@@ -57,7 +57,7 @@ def register(sub) -> None:
     p.add_argument("--no-table", action="store_true", help="do not write the per-segment table")
     p.add_argument("--picture", default=None, metavar="PNG", help="also draw the segments (top view, one colour each) into this PNG")
     p.add_argument("--top", type=int, default=10, help="segments listed in the summary, default %(default)s")
-    p.add_argument("--columns", default=None, help="column spec for text input, e.g. x,y,z,intensity")
+    add_columns(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)

@@ -6,7 +6,7 @@ import sys
 import time
 
 from .. import _json
-from ._args import read_input
+from ._args import add_columns, read_input
 
 EPILOG = """examples:
   lidarfx select seg.laz planes.laz --where "segment_id >= 0 and segment_size > 50 and planarity > 0.5"
@@ -35,7 +35,7 @@ def register(sub) -> None:
     p.add_argument("output", help="output point cloud with the selected points")
     p.add_argument("-w", "--where", required=True, metavar="EXPR", help='condition, e.g. "segment_id >= 0 and planarity > 0.5"')
     p.add_argument("--invert", action="store_true", help="keep the points where EXPR does NOT hold")
-    p.add_argument("--columns", default=None, help="column spec for text input, e.g. x,y,z,intensity")
+    add_columns(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
