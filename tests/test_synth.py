@@ -98,6 +98,18 @@ def test_generate_rejects_unknown_kind_and_bad_parameters():
                 {"density": 1e308, "sampling": "grid"}):
         with pytest.raises(LidarfxError, match="at most 50,000,000"):
             synth.generate("plane", **bad)
+    # scene parameters out of range: one-line errors (tracebacks, hours of work or PiB allocations before)
+    for kind, bad in [("facade", {"n_floors": -1}), ("facade", {"glass_fraction": 2}), ("facade", {"noise_fraction": 1e9}),
+                      ("facade", {"range_falloff": float("nan")}), ("facade", {"windows_per_floor": 1.5}),
+                      ("rockface", {"width": 1e9}), ("rockface", {"overhang": -1}), ("rockface", {"scanner_height": float("nan")}),
+                      ("rockface", {"overhang_x": (1.0,)}), ("rockface", {"cell_width": 1e-5}),
+                      ("powerline", {"n_trees": 10**9}), ("powerline", {"noise_fraction": -0.1}),
+                      ("powerline", {"catenary_a": (900.0, float("inf"))}), ("powerline", {"pylon_height": 0}),
+                      ("tower", {"bolt_radius": 0}), ("tower", {"bolt_points": 10**9}), ("tower", {"bolts_per_joint": -1}),
+                      ("tower", {"base_width": -1}), ("terrain", {"ditch_radius": 1e9}), ("terrain", {"dike_offset": float("nan")})]:
+        with pytest.raises(LidarfxError):
+            synth.generate(kind, **bad)
+    assert len(synth.generate("facade", n_floors=1, windows_per_floor=0, glass_fraction=0, range_falloff=False)) > 0
     with pytest.raises(LidarfxError):
         synth.edge(angle=0)
     with pytest.raises(LidarfxError):

@@ -42,13 +42,68 @@ def make_rng(seed: Any) -> np.random.Generator:
     return np.random.default_rng(seed)
 
 
-def check_positive(name: str, value: Any) -> float:
+MAX_LENGTH = 10_000.0
+"""Largest length (m) of a synthetic scene's parts: widths, heights, spans, radii."""
+
+MAX_COUNT = 10_000
+"""Largest count of a synthetic scene's parts: floors, spans, trees, panels, bolts."""
+
+
+def check_positive(name: str, value: Any, hi: float = math.inf) -> float:
+    """A finite number > 0 (and <= ``hi``)."""
     try:
         v = float(value)
     except (TypeError, ValueError):
         raise LidarfxError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(v) or v <= 0:
         raise LidarfxError(f"{name} must be > 0, got {value!r}")
+    if v > hi:
+        raise LidarfxError(f"{name} must be at most {hi:g}, got {value!r}")
+    return v
+
+
+def check_length(name: str, value: Any) -> float:
+    """A length in metres: > 0 and at most :data:`MAX_LENGTH`."""
+    return check_positive(name, value, MAX_LENGTH)
+
+
+def check_count(name: str, value: Any, lo: int = 0, hi: int = MAX_COUNT) -> int:
+    """A whole number in ``lo .. hi``."""
+    try:
+        v = int(value)
+        ok = v == float(value)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise LidarfxError(f"{name} must be a whole number, got {value!r}")
+    if not lo <= v <= hi:
+        raise LidarfxError(f"{name} must be in {lo} .. {hi}, got {value!r}")
+    return v
+
+
+def check_finite(name: str, value: Any) -> float:
+    """Any finite number."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise LidarfxError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise LidarfxError(f"{name} must be a finite number, got {value!r}")
+    return v
+
+
+def check_flag(name: str, value: Any) -> bool:
+    """True / False (or 1 / 0)."""
+    if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, float)) and value in (0, 1)):
+        return bool(value)
+    raise LidarfxError(f"{name} must be true or false, got {value!r}")
+
+
+def check_fraction(name: str, value: Any) -> float:
+    """A share in [0, 1]."""
+    v = check_nonneg(name, value)
+    if v > 1:
+        raise LidarfxError(f"{name} is a share in [0, 1], got {value!r}")
     return v
 
 

@@ -23,6 +23,10 @@ from ._common import (
     Scene,
     add_noise,
     capture_params,
+    check_count,
+    check_flag,
+    check_fraction,
+    check_length,
     check_nonneg,
     check_origin,
     check_point,
@@ -117,12 +121,18 @@ def facade(
         ``scanner``, ``objects`` (id, class, kind, geometry), ``counts``.
     """
     params = capture_params(locals())
-    width = check_positive("width", width)
-    wall_height = check_positive("wall_height", wall_height)
-    depth = check_positive("depth", depth)
+    width = check_length("width", width)
+    wall_height = check_length("wall_height", wall_height)
+    depth = check_length("depth", depth)
     density = check_positive("density", density)
     noise = check_nonneg("noise", noise)
-    ref_range = check_positive("ref_range", ref_range)
+    ref_range = check_length("ref_range", ref_range)
+    n_floors = check_count("n_floors", n_floors, 1, 100)
+    windows_per_floor = check_count("windows_per_floor", windows_per_floor, 0, 1000)
+    window_depth = check_nonneg("window_depth", window_depth)
+    glass_fraction = check_fraction("glass_fraction", glass_fraction)
+    noise_fraction = check_fraction("noise_fraction", noise_fraction)
+    range_falloff = check_flag("range_falloff", range_falloff)
     if not 0.0 < roof_pitch < 80.0:
         raise LidarfxError(f"roof_pitch must be in (0, 80) degrees, got {roof_pitch!r}")
     ww, wh = (float(v) for v in window_size)

@@ -20,6 +20,9 @@ from ._common import (
     Scene,
     add_noise,
     capture_params,
+    check_count,
+    check_fraction,
+    check_length,
     check_nonneg,
     check_origin,
     check_positive,
@@ -164,14 +167,19 @@ def powerline(
     params = capture_params(locals())
     if not isinstance(n_spans, (int, np.integer)) or n_spans < 1:
         raise LidarfxError(f"n_spans must be a positive integer, got {n_spans!r}")
-    span_length = check_positive("span_length", span_length)
+    n_spans = check_count("n_spans", n_spans, 1, 100)
+    span_length = check_length("span_length", span_length)
     density = check_positive("density", density)
     wire_density = check_positive("wire_density", wire_density)
     pylon_density = check_positive("pylon_density", pylon_density)
     noise = check_nonneg("noise", noise)
-    half_w = check_positive("corridor_width", corridor_width) / 2.0
+    half_w = check_length("corridor_width", corridor_width) / 2.0
+    pylon_height = check_length("pylon_height", pylon_height)
+    n_trees = check_count("n_trees", n_trees)
+    n_near_trees = check_count("n_near_trees", n_near_trees)
+    noise_fraction = check_fraction("noise_fraction", noise_fraction)
     a_lo, a_hi = (float(v) for v in catenary_a)
-    if not 0 < a_lo <= a_hi:
+    if not (0 < a_lo <= a_hi and math.isfinite(a_hi)):
         raise LidarfxError(f"catenary_a must be (min, max) with 0 < min <= max, got {catenary_a!r}")
     cls = merge_classes(POWERLINE_CLASSES, classes)
     origin = check_origin(origin)

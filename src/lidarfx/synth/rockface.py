@@ -21,9 +21,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from ._common import (
+    MAX_COUNT,
     Scene,
     add_noise,
     capture_params,
+    check_finite,
+    check_flag,
+    check_fraction,
+    check_length,
     check_nonneg,
     check_origin,
     check_positive,
@@ -134,16 +139,29 @@ def rockface(
     for k, role in enumerate(("main", "side", "roof")):
         if abs(set_normals[k][_ROLE_AXIS[role]]) < 0.2:
             raise LidarfxError(f"joint set {k} is too oblique for its role ({role}); see the rockface docs")
-    width, height = check_positive("width", width), check_positive("height", height)
-    cw, ch = check_positive("cell_width", cell_width), check_positive("cell_height", cell_height)
+    width, height = check_length("width", width), check_length("height", height)
+    cw, ch = check_length("cell_width", cell_width), check_length("cell_height", cell_height)
     density = check_positive("density", density)
     noise = check_nonneg("noise", noise)
     scatter = check_nonneg("scatter", scatter)
-    depth = check_positive("overhang_depth", overhang_depth)
+    depth = check_length("overhang_depth", overhang_depth)
+    overhang = check_flag("overhang", overhang)
+    overhang_z = check_nonneg("overhang_z", overhang_z)
+    scanner_distance = check_length("scanner_distance", scanner_distance)
+    scanner_height = check_finite("scanner_height", scanner_height)
+    try:
+        overhang_x = tuple(check_finite("overhang_x", v) for v in overhang_x)
+    except TypeError:
+        raise LidarfxError(f"overhang_x must be two numbers (from, to), got {overhang_x!r}") from None
+    if len(overhang_x) != 2:
+        raise LidarfxError(f"overhang_x must be two numbers (from, to), got {overhang_x!r}")
+    noise_fraction = check_fraction("noise_fraction", noise_fraction)
     origin = check_origin(origin)
     rng = make_rng(seed)
 
     nc, nr = max(1, int(round(width / cw))), max(1, int(round(height / ch)))
+    if nc * nr > 100 * MAX_COUNT:
+        raise LidarfxError(f"{nc} x {nr} facets are too many; use larger cell_width / cell_height")
     cw, ch = width / nc, height / nr
     gap = min(0.05, 0.05 * cw, 0.05 * ch)
     lean = 0.18  # the face steps back with height (about 80° overall)

@@ -15,6 +15,8 @@ import numpy as np
 
 from ._common import (
     capture_params,
+    check_finite,
+    check_length,
     check_nonneg,
     check_origin,
     check_positive,
@@ -103,7 +105,7 @@ def terrain(
         the dike direction, ``inner`` / ``outer`` of the ditch arc.
     """
     params = capture_params(locals())
-    size = check_positive("size", size)
+    size = check_length("size", size)
     density = check_positive("density", density)
     noise = check_nonneg("noise", noise)
     sampling = check_sampling(sampling)
@@ -114,7 +116,9 @@ def terrain(
     check_positive("ditch_bottom_width", ditch_bottom_width)
     if not ditch_top_width > ditch_bottom_width:
         raise LidarfxError("ditch_top_width must be larger than ditch_bottom_width")
-    ditch_radius = check_positive("ditch_radius", ditch_radius)
+    ditch_radius = check_length("ditch_radius", ditch_radius)
+    for name, v in (("dike_azimuth", dike_azimuth), ("dike_offset", dike_offset), ("ditch_offset", ditch_offset)):
+        check_finite(name, v)
     relief = check_nonneg("relief", relief)
     step = check_positive("breakline_step", breakline_step)
     origin = check_origin(origin)

@@ -17,6 +17,8 @@ from ._common import (
     Scene,
     add_noise,
     capture_params,
+    check_count,
+    check_length,
     check_nonneg,
     check_origin,
     check_positive,
@@ -65,10 +67,11 @@ def lattice_members(
     lower chords from the two face corners at the arm height and two upper
     chords from the corners ``depth`` higher, all meeting at the tip.
     """
-    height = check_positive("height", height)
+    height = check_length("height", height)
     if not isinstance(n_panels, (int, np.integer)) or n_panels < 1:
         raise LidarfxError(f"n_panels must be a positive integer, got {n_panels!r}")
-    b, t = base_width / 2.0, top_width / 2.0
+    n_panels = check_count("n_panels", n_panels, 1, 1000)
+    b, t = check_length("base_width", base_width) / 2.0, check_length("top_width", top_width) / 2.0
 
     def half(z: float) -> float:
         return b + (t - b) * min(z, height) / height
@@ -181,6 +184,10 @@ def tower(
     params = capture_params(locals())
     density = check_positive("density", density)
     noise = check_nonneg("noise", noise)
+    bolts_per_joint = check_count("bolts_per_joint", bolts_per_joint, 0, 100)
+    bolt_points = check_count("bolt_points", bolt_points, 1)
+    bolt_radius = check_length("bolt_radius", bolt_radius)
+    bolt_height = check_length("bolt_height", bolt_height)
     origin = check_origin(origin)
     rng = make_rng(seed)
     members, tips = lattice_members(height, base_width, top_width, n_panels, arms)
