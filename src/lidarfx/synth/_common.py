@@ -49,13 +49,21 @@ MAX_COUNT = 10_000
 """Largest count of a synthetic scene's parts: floors, spans, trees, panels, bolts."""
 
 
-def check_positive(name: str, value: Any, hi: float = math.inf) -> float:
-    """A finite number > 0 (and <= ``hi``)."""
+def check_finite(name: str, value: Any) -> float:
+    """Any finite number."""
     try:
         v = float(value)
     except (TypeError, ValueError):
         raise LidarfxError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
+    if not math.isfinite(v):
+        raise LidarfxError(f"{name} must be a finite number, got {value!r}")
+    return v
+
+
+def check_positive(name: str, value: Any, hi: float = math.inf) -> float:
+    """A finite number > 0 (and <= ``hi``)."""
+    v = check_finite(name, value)
+    if v <= 0:
         raise LidarfxError(f"{name} must be > 0, got {value!r}")
     if v > hi:
         raise LidarfxError(f"{name} must be at most {hi:g}, got {value!r}")
@@ -81,17 +89,6 @@ def check_count(name: str, value: Any, lo: int = 0, hi: int = MAX_COUNT) -> int:
     return v
 
 
-def check_finite(name: str, value: Any) -> float:
-    """Any finite number."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise LidarfxError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise LidarfxError(f"{name} must be a finite number, got {value!r}")
-    return v
-
-
 def check_flag(name: str, value: Any) -> bool:
     """True / False (or 1 / 0)."""
     if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, float)) and value in (0, 1)):
@@ -108,11 +105,9 @@ def check_fraction(name: str, value: Any) -> float:
 
 
 def check_nonneg(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise LidarfxError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < 0:
+    """A finite number >= 0."""
+    v = check_finite(name, value)
+    if v < 0:
         raise LidarfxError(f"{name} must be >= 0, got {value!r}")
     return v
 
