@@ -612,6 +612,7 @@ def test_points_with_nan_coordinates(tmp_path):
     s = r0.sample(np.array([5.0, np.nan, 5.0]), np.array([5.0, 5.0, np.inf]))
     assert np.isfinite(s[0]) and np.isnan(s[1:]).all()
     assert np.isclose(s[0], 0.1 * 5 + 0.05 * 5, atol=0.05)
+    assert np.isnan(r0.sample(np.nan, 5.0)) and np.isclose(r0.sample(5.0, 5.0), s[0])  # scalars too
     assert np.isnan(height_above_ground(dirty, r0)[400:]).all()
     # the CLI: text output keeps the NaN point, with NaN height; the DTM is written
     src = tmp_path / "nan.xyz"

@@ -113,9 +113,7 @@ class Raster:
         top = a[i0, j0] * (1 - tx) + a[i0, j1] * tx
         bot = a[i1, j0] * (1 - tx) + a[i1, j1] * tx
         out = top * (1 - ty) + bot * ty
-        if bad.any():
-            out[bad] = np.nan
-        return out
+        return np.where(bad, np.nan, out) if bad.any() else out
 
     # ---------------------------------------------------------------- writing
     def write(self, path: str | os.PathLike, *, engine: str = "auto") -> Path:
