@@ -643,3 +643,11 @@ def test_huge_window_is_capped_at_the_grid_diagonal():
     assert not ref[roof].any() and ref[~roof].mean() > 0.9
     assert np.array_equal(classify_ground(cloud, window=1e308, progress=False), ref)
     assert np.array_equal(classify_ground(cloud, window=1.2 * diag, progress=False), ref)
+    # the claim itself, without the cap: openings beyond the diagonal flag nothing more
+    from lidarfx.ground.smrf import progressive_objects
+
+    grid = np.random.default_rng(7).normal(0, 1, (12, 17)).cumsum(axis=0).cumsum(axis=1)
+    cap = window_radius(1e308, 1.0, 17, 12)
+    assert cap == 21  # ceil(hypot(16, 11)) + 1
+    assert np.array_equal(progressive_objects(grid, 1.0, 0.1, cap), progressive_objects(grid, 1.0, 0.1, cap + 25))
+    assert not np.array_equal(progressive_objects(grid, 1.0, 0.1, 3), progressive_objects(grid, 1.0, 0.1, cap))
