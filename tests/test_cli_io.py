@@ -159,6 +159,7 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         (["classify", "train", "{tmp}/a.xyz", "--model", "{tmp}/nodir/m.skops"], "output folder does not exist"),
         (["classify", "evaluate", "{tmp}/a.xyz", "--out", "{tmp}/a.xyz"], "exists and is not a folder"),
         (["classify", "evaluate", "{tmp}/a.xyz", "--buffer", "-1"], "buffer must be a number of metres"),
+        (["classify", "evaluate", "{tmp}/a.xyz", "-r", "1e308"], "the default buffer (twice the largest radius) is inf m"),
     ],
 )
 def test_cli_errors_in_process(tmp_path, capsys, argv, message):

@@ -741,6 +741,9 @@ def evaluate(
     cv_seed = check_seed(cv_seed)
     buf = default_buffer(cfg) if buffer is None else float(buffer)
     if not (buf >= 0 and math.isfinite(buf)):
+        if buffer is None:
+            raise LidarfxError(f"the default buffer (twice the largest radius) is {buf:g} m, not a finite number; "
+                               "give --buffer")
         raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")
     ci_size = float(block_size) if block_size else 20.0
     _check_bootstrap(bootstrap, ci_size)
