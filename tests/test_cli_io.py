@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from lidarfx.cli import main
+import lidarfx
 from lidarfx.io import read
 
 REAL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "real").resolve()
@@ -224,3 +225,19 @@ def test_info_with_a_column_spec(tmp_path, capsys):
     assert [(c["code"], c["count"]) for c in res["classes"]] == [(2, 2), (6, 1)]
     assert main(["info", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["classes"] is None  # col3 is no classification
+
+
+def test_a_column_spec_applies_to_the_text_inputs_only(tmp_path, capsys):
+    """One command can mix headerless text and LAS: `--columns` names the text file's columns and
+    leaves the LAS file's fields alone; a spec that fits no input is still refused."""
+    txt = tmp_path / "pts.txt"
+    txt.write_text("1 2 3 2\n4 5 6 6\n7 8 9 2\n")
+    las = tmp_path / "pts.laz"
+    lidarfx.write(lidarfx.PointCloud(np.array([[0.0, 0, 0], [1, 1, 1]]),
+                                     {"classification": np.array([6, 6], np.uint8)}), las)
+    assert main(["info", str(txt), str(las), "--columns", "x,y,z,classification", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [r["file"] for r in res] == [str(txt), str(las)]
+    assert [[(c["code"], c["count"]) for c in r["classes"]] for r in res] == [[(2, 2), (6, 1)], [(6, 2)]]
+    assert main(["info", str(las), "--columns", "x,y,z,classification"]) == 2
+    assert "a column spec applies only to text and .npy files" in capsys.readouterr().err

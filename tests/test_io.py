@@ -616,6 +616,20 @@ def test_text_bad_column_spec(tmp_path, columns, message):
     assert "a.txt" in str(err.value)
 
 
+def test_text_messages_quote_the_names_as_written(tmp_path):
+    """The aliases (r g b, class) apply to a header, but a message names the columns as the file
+    gave them: a header `a b c` is not reported as `a, blue, c`, and a duplicate through an
+    alias says which names collided."""
+    (tmp_path / "a.txt").write_text("a b c\n1 2 3\n")
+    with pytest.raises(LidarfxError, match=r"no column named x, y, z \(columns: a, b, c\)$"):
+        read(tmp_path / "a.txt")
+    (tmp_path / "b.txt").write_text("x y z red r\n1 2 3 4 5\n")
+    with pytest.raises(LidarfxError, match=r"duplicate column name\(s\): red \(r means red\)$"):
+        read(tmp_path / "b.txt")
+    cloud = read(tmp_path / "b.txt", columns="x,y,z,r,-")  # the alias itself still applies
+    assert cloud.names == ["red"]
+
+
 @pytest.mark.parametrize("ext", [".xyz", ".txt", ".csv", ".pts"])
 def test_text_round_trip(tmp_path, ext):
     cloud = small_cloud(300)

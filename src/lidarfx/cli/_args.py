@@ -48,15 +48,22 @@ def columns_of(args) -> list[str] | None:
 
 def read_clouds(paths, args, progress=None):
     """Paths for the library to read, or, with ``--columns``, the clouds read with that spec
-    (named as the user typed them, like files read by the library)."""
+    (named as the user typed them, like files read by the library).
+
+    The spec applies to the text and ``.npy`` inputs; other formats (LAS/LAZ, PLY, ``.npz``)
+    name their own fields and are read as they are, so one command can mix them.  A spec
+    that applies to none of the inputs is an error (it was meant for something)."""
     cols = columns_of(args)
     if paths is None or cols is None:
         return paths
     from .. import io
 
+    takes = [io.accepts_columns(p) for p in paths]
+    if not any(takes):
+        return [io.read(paths[0], columns=cols)]  # the reader's one-line refusal
     out = []
-    for p in paths:
-        cloud = io.read(p, columns=cols, progress=progress)
+    for p, t in zip(paths, takes):
+        cloud = io.read(p, columns=cols if t else None, progress=progress)
         cloud.meta["name"] = str(p)
         out.append(cloud)
     return out

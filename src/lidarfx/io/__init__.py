@@ -33,7 +33,7 @@ from ..errors import LidarfxError
 from ..progress import bar as _bar
 from ..progress import wanted as _wanted
 
-__all__ = ["read", "write", "info", "FORMATS", "ASPRS_CLASSES", "progress_bar"]
+__all__ = ["read", "write", "info", "accepts_columns", "FORMATS", "ASPRS_CLASSES", "progress_bar"]
 
 FORMATS: dict[str, str] = {
     ".las": "las",
@@ -113,6 +113,13 @@ def _input_module(path: Path):
     if not path.is_file():
         raise LidarfxError(f"not a file: {path}")
     return _format_module(path)
+
+
+def accepts_columns(path: str | os.PathLike) -> bool:
+    """True when ``path``'s format takes a column spec (text and plain ``.npy``); a one-line
+    error for a missing file, a folder or an unknown extension."""
+    p = Path(path)
+    return bool(_input_module(p).ACCEPTS_COLUMNS) and p.suffix.lower() != ".npz"  # .npz arrays are named
 
 
 def _one_line(exc: BaseException) -> str:

@@ -83,37 +83,43 @@ def _is_number(token: str) -> bool:
 
 
 def _header_name(token: str) -> str:
+    """A header field as a column name, before the aliases (``r`` stays ``r``)."""
     name = token.strip().strip("\"'")
     if name.startswith("//"):
         name = name[2:]
-    name = "_".join(name.strip().lower().split())
-    return _ALIASES.get(name, name)
+    return "_".join(name.strip().lower().split())
 
 
 def _resolve_names(spec: list[str] | None, header: list[str] | None, ncols: int, ext: str) -> list[str]:
+    """The column names (aliases applied); messages quote the names as the spec or header gave them."""
     if spec is not None:
         if len(spec) > ncols:
             raise LidarfxError(f"column spec has {len(spec)} names but the file has {ncols} columns")
-        names = [_ALIASES.get(s.strip(), s.strip()) for s in spec]
+        given = [s.strip() for s in spec]
     elif header is not None:
         if len(header) != ncols:
             raise LidarfxError(f"header line has {len(header)} names but the data has {ncols} columns")
-        names = header
+        given = header
     elif ext in DEFAULT_COLUMNS and len(DEFAULT_COLUMNS[ext]) <= ncols:
         names = DEFAULT_COLUMNS[ext]
     elif ext == ".pts" and ncols in _PTS_COLUMNS:
         names = _PTS_COLUMNS[ncols]
     else:
         names = ["x", "y", "z"][:ncols] + [f"col{i}" for i in range(3, ncols)]
+    if spec is not None or header is not None:
+        names = [_ALIASES.get(n, n) for n in given]
+    else:
+        given = names
     kept = [n for n in names if n not in SKIP_NAMES]
     if any(not n for n in kept):
         raise LidarfxError("empty column name in the column spec")
     dup = sorted({n for n in kept if kept.count(n) > 1})
     if dup:
-        raise LidarfxError(f"duplicate column name(s): {', '.join(dup)}")
+        also = sorted({f"{g} means {n}" for g, n in zip(given, names) if n in dup and g != n})
+        raise LidarfxError(f"duplicate column name(s): {', '.join(dup)}" + (f" ({', '.join(also)})" if also else ""))
     missing = [c for c in ("x", "y", "z") if c not in kept]
     if missing:
-        raise LidarfxError(f"no column named {', '.join(missing)} (columns: {', '.join(names)})")
+        raise LidarfxError(f"no column named {', '.join(missing)} (columns: {', '.join(given)})")
     return names
 
 
