@@ -576,6 +576,14 @@ def test_bad_seed_is_a_lidarfx_error(seed):
     assert TrainConfig(seed=2**32 - 1).seed == 2**32 - 1
 
 
+@pytest.mark.parametrize("bins", [1, 1001, 10**8, 2.5])
+def test_bad_histogram_bins_are_refused_before_training(bins):
+    """`classify train --bins 100000000` allocated 10^8 bins per thread and ran for ages."""
+    with pytest.raises(LidarfxError, match="hist_bins must be an integer from 2 to 1000"):
+        TrainConfig(hist_bins=bins)
+    assert TrainConfig(hist_bins=1000).hist_bins == 1000
+
+
 def test_a_buffer_wider_than_the_data():
     """Blocks beyond the data's span do not exist: a buffer of 1e308 m marks the same points as one
     just over the span (it raised OverflowError, and 1e5 m looped for ages); CV then says which

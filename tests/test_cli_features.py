@@ -62,6 +62,15 @@ def test_features_cli_multiscale_names(scene_las, tmp_path):
         (["--features", "eigen"], "give a radius"),
         (["-r", "-1"], "radii must be positive"),
         (["-n", "knn"], "k >= 1"),
+        # session 16: a traceback (numba cannot type the int), a 477 TiB allocation, a run of
+        # hours (10^8 bins per thread), and distances that only produced garbage ratios
+        (["-r", "0.5", "-f", "msac", "--seed", "99999999999999999999999"], "seed must be an integer from 0 to 4294967295"),
+        (["-r", "0.5", "--seed", "-1"], "seed must be an integer from 0"),
+        (["-n", "knn", "-k", "1000000000"], "k must be at most 10000 neighbours"),
+        (["-r", "0.5", "-f", "histogram", "--bins", "100000000"], "hist_bins must be an integer from 2 to 1000"),
+        (["-r", "0.5", "--d-max", "-1"], "d_max (the plane inlier distance) must be a positive finite distance"),
+        (["-r", "0.5", "--d-max", "nan"], "must be a positive finite distance, got nan"),
+        (["-r", "0.5", "--d-max", "inf"], "must be a positive finite distance, got inf"),
     ],
 )
 def test_features_cli_errors(scene_las, tmp_path, capsys, args, message):

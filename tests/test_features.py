@@ -286,6 +286,28 @@ def test_query_subset_equals_full_run():
 # ----------------------------------------------------------------- neighbourhood kinds
 
 
+def test_knn_with_more_neighbours_than_points_takes_them_all():
+    """k above the cloud's size means every point (the search asks for n; the answer is the same
+    as with k = n), and the k-th distances are found block by block (a block smaller than the
+    query set gives the same radii)."""
+    from lidarfx.features import api
+
+    xyz = scene()[:40]
+    a = compute_features(PointCloud(xyz), ["eigen", "n_neighbours"], neighbourhood="knn", k=40)
+    b = compute_features(PointCloud(xyz), ["eigen", "n_neighbours"], neighbourhood="knn", k=5000)
+    assert np.all(a["n_neighbours"] == 40)
+    for name in ("n_neighbours", "planarity", "eigenvalue1"):
+        np.testing.assert_array_equal(a[name], b[name])
+    old = api._KNN_ENTRIES
+    try:
+        api._KNN_ENTRIES = 7 * 40  # blocks of 7 queries
+        c = compute_features(PointCloud(xyz), ["eigen", "n_neighbours"], neighbourhood="knn", k=40)
+    finally:
+        api._KNN_ENTRIES = old
+    for name in ("n_neighbours", "planarity", "eigenvalue1"):
+        np.testing.assert_array_equal(a[name], c[name])
+
+
 def test_knn_neighbourhood_uses_exactly_k_points():
     from scipy.spatial import cKDTree
 

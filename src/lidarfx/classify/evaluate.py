@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import __version__
 from ..cloud import PointCloud
-from ..errors import LidarfxError, LidarfxWarning
+from ..errors import LidarfxError, LidarfxWarning, check_seed
 from .classes import ClassMap
 from .model import (
     ClassifierModel,
@@ -41,7 +41,7 @@ from .model import (
 )
 from .fastpredict import predict as fast_predict
 from .objects import building_class
-from .pipeline import CloudSample, balanced_sample, check_seed, unit_to_metre
+from .pipeline import CloudSample, balanced_sample, unit_to_metre
 
 __all__ = ["LAYOUT", "confusion_matrix", "metrics", "random_folds", "block_folds", "block_ids", "block_bootstrap",
            "block_buffer_mask",

@@ -22,7 +22,7 @@ import numpy as np
 from .. import __version__
 from .._json import jsonable
 from ..cloud import PointCloud
-from ..errors import LidarfxError, LidarfxWarning
+from ..errors import LidarfxError, LidarfxWarning, check_seed
 from .classes import DEFAULT_IGNORE, ClassMap
 from .pipeline import (
     DEFAULT_HAG_CAP,
@@ -31,7 +31,6 @@ from .pipeline import (
     CloudSample,
     LidarFeatures,
     balanced_sample,
-    check_seed,
     feature_list,
     make_classifier,
     make_imputer,
@@ -175,6 +174,10 @@ class TrainConfig:
             raise LidarfxError("n_estimators is the number of trees (rf) or boosting iterations (hgb), at least 1; "
                                f"got {self.n_estimators} for classifier {self.classifier!r}")
         feature_list(self.features, self.radii, self.neighbourhood, self.k)  # validates
+        from ..features.api import MAX_HIST_BINS
+
+        if not (isinstance(self.hist_bins, (int, np.integer)) and 2 <= self.hist_bins <= MAX_HIST_BINS):
+            raise LidarfxError(f"hist_bins must be an integer from 2 to {MAX_HIST_BINS}, got {self.hist_bins!r}")
 
     def feature_params(self) -> dict[str, Any]:
         return {"features": self.features, "radii": list(self.radii), "neighbourhood": self.neighbourhood,

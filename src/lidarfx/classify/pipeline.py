@@ -28,7 +28,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from ..cloud import PointCloud, measurement_flags
-from ..errors import LidarfxError, LidarfxWarning
+from ..errors import LidarfxError, LidarfxWarning, check_seed
 from ..features.api import check_options, radii_list, scale_suffix
 
 __all__ = [
@@ -548,18 +548,6 @@ def unit_to_metre(cloud: PointCloud) -> float:
 
     u = (cloud_crs(cloud) or {}).get("unit_to_metre")
     return float(u) if u and u > 0 else 1.0
-
-
-def check_seed(seed: Any) -> int:
-    """A random seed as numpy and scikit-learn take it: an integer in 0 .. 2**32 - 1."""
-    try:
-        v = int(seed)
-        ok = v == seed and 0 <= v < 2**32
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok:
-        raise LidarfxError(f"seed must be an integer from 0 to {2**32 - 1}, got {seed!r}")
-    return v
 
 
 def _cap32(cap: float | None) -> np.float32:

@@ -8,7 +8,7 @@ import numba as nb
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import LidarfxError
+from ..errors import LidarfxError, check_seed
 from ..neighbors import NeighborIndex, default_cell_for_knn, ring_buffer_size
 from ..progress import bar, wanted
 from . import slots as S
@@ -86,9 +86,24 @@ def _suffixes(rs: list[float]) -> list[str]:
     return [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
 
 
-def check_options(req, rs, neighbourhood="sphere", k=None, convention="default", hist_bins=10, height=None) -> None:
+MAX_HIST_BINS = 1000
+"""Most bins of the height-difference histogram (a neighbourhood holds far fewer points)."""
+MAX_K = 10_000
+"""Most neighbours of a kNN neighbourhood (every query walks at least k points)."""
+_KNN_ENTRIES = 4_000_000
+"""kNN distances are found for blocks of queries of at most this many (query, neighbour) pairs."""
+
+
+def check_options(req, rs, neighbourhood="sphere", k=None, convention="default", hist_bins=10, height=None, *,
+                  d_max=0.10, msac_threshold=None, msac_iterations=100, seed=0) -> None:
     """Every parameter check of :func:`feature_arrays` (request ``req``, radii
     ``rs`` from :func:`radii_list`), before any work."""
+    check_seed(seed)
+    for name, v in (("d_max (the plane inlier distance)", d_max), ("msac_threshold", msac_threshold)):
+        if v is not None and not (isinstance(v, (int, float, np.integer, np.floating)) and 0 < v < math.inf):
+            raise LidarfxError(f"{name} must be a positive finite distance, got {v!r}")
+    if not (isinstance(msac_iterations, (int, np.integer)) and 1 <= msac_iterations <= 1_000_000):
+        raise LidarfxError(f"msac_iterations must be an integer from 1 to 1000000, got {msac_iterations!r}")
     if neighbourhood not in NEIGHBOURHOODS:
         raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
     if convention not in CONVENTIONS:
@@ -100,14 +115,16 @@ def check_options(req, rs, neighbourhood="sphere", k=None, convention="default",
     if neighbourhood == "knn":
         if not k or k < 1:
             raise LidarfxError("neighbourhood 'knn' needs k >= 1 (e.g. k=20)")
+        if k > MAX_K:
+            raise LidarfxError(f"k must be at most {MAX_K} neighbours, got {k}")
         if len(rs) > 1:
             raise LidarfxError("kNN takes at most one radius (the cap)")
     elif not rs:
         raise LidarfxError("give a radius (e.g. radius=0.5) or several radii")
     elif len(set(_suffixes(rs))) < len(rs):
         raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii that differ when rounded to 2 decimals")
-    if hist_bins < 2:
-        raise LidarfxError("hist_bins must be >= 2")
+    if not (isinstance(hist_bins, (int, np.integer)) and 2 <= hist_bins <= MAX_HIST_BINS):
+        raise LidarfxError(f"hist_bins must be an integer from 2 to {MAX_HIST_BINS}, got {hist_bins!r}")
     if height is not None and not height > 0:
         raise LidarfxError("cylinder height limit must be > 0")
 
@@ -161,10 +178,12 @@ def feature_arrays(
     req = features if isinstance(features, Request) else resolve(features)
     xyz = np.asarray(xyz, dtype=np.float64)
     if not req.slots:
-        check_options(req, [], neighbourhood, k, convention, hist_bins, height)
+        check_options(req, [], neighbourhood, k, convention, hist_bins, height, d_max=d_max,
+                      msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed)
         return {}
     rs = radii_list(radius, radii)
-    check_options(req, rs, neighbourhood, k, convention, hist_bins, height)
+    check_options(req, rs, neighbourhood, k, convention, hist_bins, height, d_max=d_max,
+                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed)
     _check_not_empty(xyz)
     if index is None:
         index = _new_index(xyz, neighbourhood, k, rs, req)
@@ -182,10 +201,17 @@ def feature_arrays(
         qid = perm if query_ids is None else np.asarray(query_ids, dtype=np.int64)[perm]
     m = len(q)
     if neighbourhood == "knn":
-        _, kd = index.knn(q + index.origin, int(k), max_radius=rs[0] if rs else None)
-        rk = np.where(np.isfinite(kd), kd, -np.inf).max(axis=1)
-        if rs:
-            rk = np.where(np.isfinite(kd[:, -1]), rk, rs[0])
+        # more neighbours than points cannot exist: the search asks for at most n (same answer);
+        # only each query's k-th distance is kept, so blocks of queries bound the memory
+        kk = min(int(k), len(xyz))
+        rk = np.empty(m)
+        step = max(1, _KNN_ENTRIES // kk)
+        for a in range(0, m, step):
+            _, kd = index.knn(q[a:a + step] + index.origin, kk, max_radius=rs[0] if rs else None)
+            r_a = np.where(np.isfinite(kd), kd, -np.inf).max(axis=1)
+            if rs:
+                r_a = np.where(np.isfinite(kd[:, -1]), r_a, rs[0])
+            rk[a:a + step] = r_a
         rk = np.maximum(rk, 0.0)
         rad = (rk * (1.0 + 1e-9) + 1e-12).reshape(-1, 1)
         names_for_scale = [""]
@@ -380,7 +406,8 @@ def stream_features(
         raise LidarfxError("stream_features expects a PointCloud (see lidarfx.read)")
     req = resolve(features)
     rs = radii_list(radius, radii) if req.slots else []
-    check_options(req, rs, neighbourhood, k, convention, hist_bins, height)
+    check_options(req, rs, neighbourhood, k, convention, hist_bins, height, d_max=d_max,
+                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed)
     if req.slots:
         _check_not_empty(cloud.xyz)
     index = _new_index(cloud.xyz, neighbourhood, k, rs, req) if req.slots else None
