@@ -356,6 +356,10 @@ def test_cli_segment_errors(tmp_path, capsys):
     assert main(["segment", str(src), str(tmp_path / "o.laz"), "--picture", str(tmp_path / "no" / "p.png")]) == 2
     assert "output folder does not exist" in capsys.readouterr().err
     assert not (tmp_path / "o.laz").exists()
+    # a negative --top listed nothing and said nothing
+    assert main(["segment", str(src), str(tmp_path / "o.laz"), "--top", "-1"]) == 2
+    assert "--top is the number of segments listed, 0 or more; got -1" in capsys.readouterr().err
+    assert not (tmp_path / "o.laz").exists()
 
 
 def test_cli_picture(tmp_path):

@@ -80,6 +80,10 @@ def run(args) -> int:
         write_segments_json,
     )
 
+    if args.top < 0:
+        from ..errors import LidarfxError
+
+        raise LidarfxError(f"--top is the number of segments listed, 0 or more; got {args.top}")
     if args.picture:
         check_picture_path(args.picture)
     t0 = time.perf_counter()
@@ -117,7 +121,7 @@ def run(args) -> int:
 
     n = len(out)
     nseg_pts = meta["segmented_points"]
-    top = rows[: max(args.top, 0)]
+    top = rows[: args.top]
     summary = {
         "input": str(args.input),
         "output": str(args.output),
