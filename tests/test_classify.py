@@ -559,6 +559,26 @@ def test_model_refuses_cloud_missing_a_feature(tmp_path, capsys):
     ref = model.predict(cloud)
     model.features.precomputed = True
     np.testing.assert_array_equal(model.predict(right), ref)
+    # the refusal names a command that writes every feature the model reads (the helper's hint
+    # said only "--features ..."); run as printed, its output predicts like the model itself
+    multi = train(cloud, classes="2,5", classifier="rf", n_estimators=10,
+                  features="planarity,plane_std,dh_peaks,number_of_returns", radii=[1.0, 2.0])
+    src = tmp_path / "src.laz"
+    lidarfx.write(cloud, src)
+    multi.features.precomputed = True
+    with pytest.raises(LidarfxError) as err:
+        multi.predict(lidarfx.read(src))
+    cmd = str(err.value).split("compute them with: ")[1].split(" (or predict")[0]
+    assert cmd == "lidarfx features IN OUT -r 1 -r 2 --features eigen,plane,histogram"
+    fx = tmp_path / "fx.laz"
+    assert main(["features", str(src), str(fx), *cmd.split()[4:], "-q"]) == 0
+    pre = multi.predict(lidarfx.read(fx))
+    multi.features.precomputed = False
+    np.testing.assert_array_equal(pre, multi.predict(lidarfx.read(src)))
+    # one radius: lidarfx features writes no suffix, and the hint says so
+    model.features.precomputed = True
+    with pytest.raises(LidarfxError, match=r"-r 1 --features eigen and add the suffix _r1\.00 to their names"):
+        model.predict(wrong)
 
 
 # --------------------------------------------------------------------------- evaluation

@@ -30,6 +30,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from ..cloud import PointCloud, measurement_flags
 from ..errors import LidarfxError, LidarfxWarning, check_seed
 from ..features.api import check_options, radii_list, scale_suffix
+from ..features import slots as S
 
 __all__ = [
     "CloudSample",
@@ -381,9 +382,30 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     f"{name} lacks {len(missing)} of the {len(need)} precomputed features the model needs "
                     f"(e.g. {', '.join(missing[:4])}); the model was trained at radii {rs} m"
                     + (f", the cloud has {', '.join(have)}" if have else "")
-                    + f" — compute them with: lidarfx features IN OUT {' '.join('-r ' + f'{r:g}' for r in sorted(set(float(r) for r in self.radii)))}"
-                    " --features ... (or predict without --precomputed)"
+                    + f" — compute them with: {self.features_command()} (or predict without --precomputed)"
                 )
+
+    def features_command(self) -> str:
+        """The ``lidarfx features`` command that writes every neighbourhood feature this transformer
+        reads (whole groups: a superset), for ``--precomputed``."""
+        _, slots, _, rs = self._plan()
+        groups = [g for g, members in S.GROUPS.items() if set(members) & set(slots)]
+        args = ["lidarfx features IN OUT"]
+        if self.neighbourhood != "sphere":
+            args.append(f"-n {self.neighbourhood}")
+        if self.neighbourhood == "knn":
+            args.append(f"-k {self.k}")
+        args += [f"-r {r:g}" for r in sorted(set(float(r) for r in rs))]
+        if self.scanner is not None:
+            args.append("--scanner " + ",".join(f"{v:g}" for v in self.scanner))
+        if int(self.hist_bins) != 10:
+            args.append(f"--bins {int(self.hist_bins)}")
+        args.append("--features " + ",".join(groups))
+        cmd = " ".join(args)
+        if self.neighbourhood == "knn" or len(set(rs)) == 1:  # lidarfx features adds no suffix then
+            sfx = f"_k{int(self.k)}" if self.neighbourhood == "knn" else scale_suffix(rs[0])
+            cmd += f" and add the suffix {sfx} to their names"
+        return cmd
 
     def _hag(self, cloud: PointCloud, unit: float, cache: dict) -> np.ndarray:
         """The height above ground of every point of ``cloud`` in metres, computed once per cloud."""

@@ -54,7 +54,9 @@ TRAIN_EPILOG = """examples:
 
 PREDICT_EPILOG = """examples:
   lidarfx classify predict new.laz out.laz --model m.skops
-  lidarfx classify predict new_fx.laz out.laz --model m.skops --precomputed   # features already in the file
+  # features already in the file (for the default model: these groups at 1, 2 and 3 m)
+  lidarfx features new.laz new_fx.laz -r 1 -r 2 -r 3 --features eigen,plane,density,histogram,distribution
+  lidarfx classify predict new_fx.laz out.laz --model m.skops --precomputed
   lidarfx classify predict delivered.laz out.laz --model m.skops --ground class   # the file's class 2 is the ground
   lidarfx classify predict new.laz out.laz --model m.skops --picture classes.png  # + a plan-view class map
   lidarfx classify predict new.laz out.laz --model m.skops --probabilities  # + probability_ground, ... per point
