@@ -584,6 +584,30 @@ def test_bad_histogram_bins_are_refused_before_training(bins):
     assert TrainConfig(hist_bins=1000).hist_bins == 1000
 
 
+@pytest.mark.parametrize("opts, message", [
+    ({"n_estimators": 10**9}, "from 1 to 100000"),  # ran for hours
+    ({"terrain_augment": 10**9}, "terrain_augment must be a number of copies from 0 to 100"),  # 5.6 GB, then a traceback
+    ({"n_jobs": 10**23}, "n_jobs must be a number of threads from 1 to 1024"),  # ctypes OverflowError traceback
+    ({"n_jobs": 0}, "n_jobs must be a number of threads"),
+    ({"n_jobs": -1}, "n_jobs must be a number of threads"),
+    ({"radii": [1e-300]}, "radii must be at least 1e-09"),  # ZeroDivisionError in the thinning
+    ({"scanner": [float("nan"), 0, 0]}, "scanner must be three finite numbers"),
+])
+def test_training_options_out_of_range_are_refused(opts, message):
+    with pytest.raises(LidarfxError, match=message):
+        TrainConfig(**opts)
+
+
+@pytest.mark.parametrize("opts, message", [
+    ({"bootstrap": 10**9}, "from 0 \\(no intervals\\) to 100000"),  # an 82 GiB allocation
+    ({"block_size": 1e-300}, "block size must be a number of metres from 0.01 on"),  # said "only 1 block"
+])
+def test_evaluation_options_out_of_range_are_refused_before_the_work(opts, message):
+    cloud = _scene(1, size=20.0, density=4.0, extras=False)
+    with pytest.raises(LidarfxError, match=message):
+        evaluate([cloud], cv=3, config=TrainConfig(**FAST), **opts)
+
+
 def test_a_buffer_wider_than_the_data():
     """Blocks beyond the data's span do not exist: a buffer of 1e308 m marks the same points as one
     just over the span (it raised OverflowError, and 1e5 m looped for ages); CV then says which

@@ -71,6 +71,8 @@ def test_features_cli_multiscale_names(scene_las, tmp_path):
         (["-r", "0.5", "--d-max", "-1"], "d_max (the plane inlier distance) must be a positive finite distance"),
         (["-r", "0.5", "--d-max", "nan"], "must be a positive finite distance, got nan"),
         (["-r", "0.5", "--d-max", "inf"], "must be a positive finite distance, got inf"),
+        (["-r", "1e-300"], "radii must be at least 1e-09, got 1e-300"),  # a ZeroDivisionError in classify
+        (["-r", "1e-9"], "the radius is too small for the cloud's extent"),  # int64 column keys overflowed
     ],
 )
 def test_features_cli_errors(scene_las, tmp_path, capsys, args, message):
@@ -133,3 +135,31 @@ def test_features_help_names_every_group():
     text = " ".join(EPILOG.split())
     listed = set(re.findall(r"[a-z_]+", text[text.index("feature groups:"):]))
     assert set(available()) <= listed, set(available()) - listed
+
+
+@pytest.mark.parametrize("pos", ["nan,0,0", "0,inf,0"])
+def test_a_position_must_be_finite(scene_las, tmp_path, capsys, pos):
+    """`--scanner nan,0,0` was accepted and turned the normals up or down at random."""
+    with pytest.raises(SystemExit) as exc:
+        main(["features", str(scene_las), str(tmp_path / "o.laz"), "-r", "0.5", "--scanner", pos])
+    assert exc.value.code == 2
+    assert f"a position x,y,z must be finite numbers, got '{pos}'" in capsys.readouterr().err
+    assert not (tmp_path / "o.laz").exists()
+    with pytest.raises(lidarfx.LidarfxError, match="scanner position must be three finite numbers"):
+        lidarfx.features.stream_features(lidarfx.read(scene_las), "plane", radius=0.5,
+                                         scanner=[float(v) for v in pos.split(",")])
+
+
+def test_a_position_may_start_with_a_minus_sign(scene_las, tmp_path):
+    """`--scanner -1,2,3` was refused by argparse ("expected one argument"): a value starting with
+    '-' is taken for an option unless it is one plain number.  It now reads as --scanner=-1,2,3."""
+    from lidarfx.cli._args import join_number_lists
+
+    assert join_number_lists(["features", "--scanner", "-1,2,3", "-r", "-1"]) == [
+        "features", "--scanner=-1,2,3", "-r", "-1"]
+    assert join_number_lists(["synth", "plane", "p.laz", "--origin", "-5e5,-2.5,0", "--rotation", "random"]) == [
+        "synth", "plane", "p.laz", "--origin=-5e5,-2.5,0", "--rotation", "random"]
+    out, ref = tmp_path / "a.laz", tmp_path / "b.laz"
+    assert main(["features", str(scene_las), str(out), "-r", "0.5", "-f", "plane", "--scanner", "-1,2,3", "-q"]) == 0
+    assert main(["features", str(scene_las), str(ref), "-r", "0.5", "-f", "plane", "--scanner=-1,2,3", "-q"]) == 0
+    np.testing.assert_array_equal(lidarfx.read(out)["normal_z"], lidarfx.read(ref)["normal_z"])

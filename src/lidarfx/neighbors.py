@@ -434,6 +434,9 @@ def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
         ny = int(math.floor((hi[1] - origin[1]) / cell)) + 1
     else:
         nx = ny = 1
+    if nx * ny >= 2**62:  # the int64 column key would overflow (Python ints do not)
+        raise LidarfxError(f"the radius is too small for the cloud's extent: the index would need "
+                           f"{nx:.3g} × {ny:.3g} columns of {cell:g}; use a larger radius")
     key = _column_keys(xyz, origin, cell, ny)
     ncells = nx * ny
     dense = ncells <= 4 * n + 4096

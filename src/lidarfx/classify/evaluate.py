@@ -162,8 +162,7 @@ def block_ids(xy: np.ndarray, block_size: float, groups: np.ndarray | None = Non
     """Id (0..B−1) of the square block of ``block_size`` m each point lies in; the grid is
     aligned to multiples of the size, and ``groups`` (e.g. a file id) keeps blocks apart."""
     xy = np.asarray(xy, dtype=np.float64)
-    if not (block_size > 0 and math.isfinite(block_size)):
-        raise LidarfxError(f"block size must be a positive number of metres, got {block_size!r}")
+    _check_block_size(block_size)
     bx = np.floor(xy[:, 0] / block_size).astype(np.int64)
     by = np.floor(xy[:, 1] / block_size).astype(np.int64)
     g = np.zeros(len(xy), np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
@@ -219,11 +218,24 @@ def block_bootstrap(ref: np.ndarray, pred: np.ndarray, blocks: np.ndarray, n_cla
     return out
 
 
+MIN_BLOCK_SIZE = 0.01
+"""Smallest spatial block (m): smaller ones hold a point each, and their ids overflow on large extents."""
+MAX_BOOTSTRAP = 100_000
+"""Most bootstrap resamples (each holds one block id per block)."""
+
+
+def _check_block_size(block_size: Any) -> None:
+    ok = isinstance(block_size, (int, float, np.integer, np.floating)) and not isinstance(block_size, bool)
+    if not (ok and MIN_BLOCK_SIZE <= block_size < math.inf):
+        raise LidarfxError(f"block size must be a number of metres from {MIN_BLOCK_SIZE:g} on, got {block_size!r}")
+
+
 def _check_bootstrap(bootstrap: Any, block_size: float) -> None:
-    if isinstance(bootstrap, bool) or not (isinstance(bootstrap, (int, np.integer)) and bootstrap >= 0):
-        raise LidarfxError(f"bootstrap must be a whole number of resamples >= 0 (0 = no intervals), got {bootstrap!r}")
-    if bootstrap and not (block_size > 0 and math.isfinite(block_size)):
-        raise LidarfxError(f"block size must be a positive number of metres, got {block_size!r}")
+    if isinstance(bootstrap, bool) or not (isinstance(bootstrap, (int, np.integer)) and 0 <= bootstrap <= MAX_BOOTSTRAP):
+        raise LidarfxError(f"bootstrap must be a whole number of resamples from 0 (no intervals) to {MAX_BOOTSTRAP}, "
+                           f"got {bootstrap!r}")
+    if bootstrap:
+        _check_block_size(block_size)
 
 
 def block_buffer_mask(xy: np.ndarray, folds: np.ndarray, block_size: float, buffer: float,
@@ -745,6 +757,8 @@ def evaluate(
             raise LidarfxError(f"the default buffer (twice the largest radius) is {buf:g} m, not a finite number; "
                                "give --buffer")
         raise LidarfxError(f"buffer must be a number of metres >= 0, got {buffer!r}")
+    if block_size:
+        _check_block_size(block_size)
     ci_size = float(block_size) if block_size else 20.0
     _check_bootstrap(bootstrap, ci_size)
     if by_slope and test is None:

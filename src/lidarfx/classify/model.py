@@ -10,6 +10,7 @@ any other type is refused before anything in it is built.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 import time
 import warnings
@@ -101,6 +102,12 @@ def cloud_density(cloud: PointCloud) -> float:
 
 
 # --------------------------------------------------------------------------- configuration
+MAX_TERRAIN_COPIES = 100
+"""Most terrain-sheared copies of the training files (each is a whole copy in memory)."""
+MAX_ESTIMATORS = 100_000
+"""Most trees (rf) or boosting iterations (hgb)."""
+
+
 @dataclass
 class TrainConfig:
     """Everything that defines a model before it sees data (stored in the model file).
@@ -139,8 +146,8 @@ class TrainConfig:
         self.radii = sorted(set(float(r) for r in self.radii))
         if self.scanner is not None:
             self.scanner = [float(v) for v in self.scanner]
-            if len(self.scanner) != 3:
-                raise LidarfxError("scanner must be x,y,z")
+            if len(self.scanner) != 3 or not all(math.isfinite(v) for v in self.scanner):
+                raise LidarfxError(f"scanner must be three finite numbers x,y,z, got {self.scanner}")
         if self.hag_cap is not None:
             self.hag_cap = float(self.hag_cap)
             if not self.hag_cap > 0:
@@ -148,8 +155,12 @@ class TrainConfig:
         if self.max_disc_points is not None:
             self.max_disc_points = float(self.max_disc_points)
         self.terrain_augment = int(self.terrain_augment or 0)
-        if self.terrain_augment < 0:
-            raise LidarfxError("terrain_augment must be >= 0")
+        if not 0 <= self.terrain_augment <= MAX_TERRAIN_COPIES:
+            raise LidarfxError(f"terrain_augment must be a number of copies from 0 to {MAX_TERRAIN_COPIES}, "
+                               f"got {self.terrain_augment}")
+        if self.n_jobs is not None and not (isinstance(self.n_jobs, (int, np.integer)) and 1 <= self.n_jobs <= 1024):
+            raise LidarfxError(f"n_jobs must be a number of threads from 1 to 1024 (or None: automatic), "
+                               f"got {self.n_jobs!r}")
         if self.density_augment:
             self.density_augment = [float(f) for f in self.density_augment]
             if not all(0.0 < f < 1.0 for f in self.density_augment):
@@ -170,9 +181,10 @@ class TrainConfig:
             raise LidarfxError("max_per_class must be >= 1 (or None for every point)")
         make_classifier(self.classifier)  # validates the kind
         self.classifier = str(self.classifier).lower()
-        if self.n_estimators is not None and (self.classifier == "nb" or int(self.n_estimators) < 1):
-            raise LidarfxError("n_estimators is the number of trees (rf) or boosting iterations (hgb), at least 1; "
-                               f"got {self.n_estimators} for classifier {self.classifier!r}")
+        if self.n_estimators is not None and (self.classifier == "nb"
+                                              or not 1 <= int(self.n_estimators) <= MAX_ESTIMATORS):
+            raise LidarfxError(f"n_estimators is the number of trees (rf) or boosting iterations (hgb), from 1 to "
+                               f"{MAX_ESTIMATORS}; got {self.n_estimators} for classifier {self.classifier!r}")
         feature_list(self.features, self.radii, self.neighbourhood, self.k)  # validates
         from ..features.api import MAX_HIST_BINS
 

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+import math
+import re
 
 
 def numbers(text: str, n: int, what: str = "value") -> list[float]:
@@ -16,11 +18,36 @@ def numbers(text: str, n: int, what: str = "value") -> list[float]:
 
 
 def xyz(text: str) -> list[float]:
-    """argparse type for a position ``x,y,z`` (e.g. ``--scanner 12.5,-3.0,1.7``)."""
+    """argparse type for a position ``x,y,z`` (e.g. ``--scanner 12.5,-3.0,1.7``): finite numbers."""
     try:
-        return numbers(text, 3, "a position x,y,z")
+        vals = numbers(text, 3, "a position x,y,z")
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+    if not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"a position x,y,z must be finite numbers, got {text!r}")
+    return vals
+
+
+NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation")
+"""Options whose value is a comma-separated list of numbers, which may start with a minus sign."""
+_NUMBER_LIST = re.compile(r"^-[0-9.][0-9.eE+\-]*(,[0-9.eE+\- ]*)+$")
+
+
+def join_number_lists(argv: list[str]) -> list[str]:
+    """``--scanner -1,2,3`` as ``--scanner=-1,2,3``: argparse takes a value starting with ``-``
+    for an option unless it is one plain number, so a position west or south of the origin was
+    refused ("expected one argument")."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a in NUMBER_LIST_OPTIONS and i + 1 < len(argv) and _NUMBER_LIST.match(argv[i + 1]):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
 
 
 def check_output(input_path: str, output_path: str) -> None:

@@ -26,6 +26,10 @@ def scale_suffix(radius: float) -> str:
     return f"_r{radius:.2f}"
 
 
+MIN_RADIUS = 1e-9
+"""Smallest radius (coordinate units)."""
+
+
 def radii_list(radius, radii) -> list[float]:
     """``radius`` and/or ``radii`` as one sorted list of distinct positive radii."""
     if radii is None and radius is None:
@@ -36,6 +40,8 @@ def radii_list(radius, radii) -> list[float]:
     out = sorted(set(float(r) for r in vals))
     if any(not (r > 0 and math.isfinite(r)) for r in out):
         raise LidarfxError(f"radii must be positive numbers, got {out}")
+    if out and out[0] < MIN_RADIUS:  # its square underflows towards 0 (densities, thinning divide by it)
+        raise LidarfxError(f"radii must be at least {MIN_RADIUS:g}, got {out[0]:g}")
     return out
 
 
@@ -95,10 +101,17 @@ _KNN_ENTRIES = 4_000_000
 
 
 def check_options(req, rs, neighbourhood="sphere", k=None, convention="default", hist_bins=10, height=None, *,
-                  d_max=0.10, msac_threshold=None, msac_iterations=100, seed=0) -> None:
+                  d_max=0.10, msac_threshold=None, msac_iterations=100, seed=0, scanner=None) -> None:
     """Every parameter check of :func:`feature_arrays` (request ``req``, radii
     ``rs`` from :func:`radii_list`), before any work."""
     check_seed(seed)
+    if scanner is not None:
+        try:
+            sc = np.asarray(scanner, dtype=np.float64)
+        except (TypeError, ValueError):
+            sc = np.zeros(0)
+        if sc.shape != (3,) or not np.isfinite(sc).all():
+            raise LidarfxError(f"scanner position must be three finite numbers x,y,z, got {scanner!r}")
     for name, v in (("d_max (the plane inlier distance)", d_max), ("msac_threshold", msac_threshold)):
         if v is not None and not (isinstance(v, (int, float, np.integer, np.floating)) and 0 < v < math.inf):
             raise LidarfxError(f"{name} must be a positive finite distance, got {v!r}")
@@ -179,11 +192,11 @@ def feature_arrays(
     xyz = np.asarray(xyz, dtype=np.float64)
     if not req.slots:
         check_options(req, [], neighbourhood, k, convention, hist_bins, height, d_max=d_max,
-                      msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed)
+                      msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
         return {}
     rs = radii_list(radius, radii)
     check_options(req, rs, neighbourhood, k, convention, hist_bins, height, d_max=d_max,
-                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed)
+                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
     _check_not_empty(xyz)
     if index is None:
         index = _new_index(xyz, neighbourhood, k, rs, req)
@@ -228,8 +241,6 @@ def feature_arrays(
     if not req.need_engine:
         _fill_nan(out.reshape(-1, m))  # otherwise the engine initialises every row it writes
     sc = np.zeros(3) if scanner is None else np.asarray(scanner, dtype=np.float64) - index.origin
-    if sc.shape != (3,):
-        raise LidarfxError("scanner position must be x,y,z")
     hz = np.inf if height is None else float(height)
     nbuf = ring_buffer_size(float(rad.max()), g.cell)
     conv = CONVENTIONS[convention]
@@ -407,7 +418,7 @@ def stream_features(
     req = resolve(features)
     rs = radii_list(radius, radii) if req.slots else []
     check_options(req, rs, neighbourhood, k, convention, hist_bins, height, d_max=d_max,
-                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed)
+                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
     if req.slots:
         _check_not_empty(cloud.xyz)
     index = _new_index(cloud.xyz, neighbourhood, k, rs, req) if req.slots else None
