@@ -161,6 +161,37 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
         (["classify", "evaluate", "{tmp}/a.xyz", "--out", "{tmp}/a.xyz"], "exists and is not a folder"),
         (["classify", "evaluate", "{tmp}/a.xyz", "--buffer", "-1"], "buffer must be a number of metres"),
         (["classify", "evaluate", "{tmp}/a.xyz", "-r", "1e308"], "the default buffer (twice the largest radius) is inf m"),
+        # edge_share is a share (1.5 was accepted: type II 30 % on real data)
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.laz", "--edge-share", "1.5"], "edge_share is a share of the boundary from 0 to 1"),
+        (["ground-eval", "{tmp}/a.xyz", "--edge-share", "1.5", "--json"], "edge_share is a share of the boundary from 0 to 1"),
+        (["dtm", "{tmp}/a.xyz", "{tmp}/d.tif", "--classify", "--edge-share", "1.5"], "edge_share is a share"),
+        # class codes are 0..255 (were accepted silently)
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.laz", "--ignore-classes", "256"],
+         "ignore_classes must be class codes from 0 to 255, got 256"),
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.laz", "--ignore-classes", "7,-1"], "class codes from 0 to 255, got -1"),
+        (["ground", "{tmp}/a.xyz", "{tmp}/b.laz", "--ignore-classes", "99999999999999999999999"],
+         "class codes from 0 to 255, got 99999999999999999999999"),
+        (["ground-eval", "{tmp}/a.xyz", "--ignore-classes", "1000000000"], "class codes from 0 to 255, got 1000000000"),
+        (["dtm", "{tmp}/a.xyz", "{tmp}/d.tif", "--classify", "--ignore-classes", "256"], "class codes from 0 to 255"),
+        # --precision: 1e9 tried a 4 GB line, a 23-digit value was a ValueError traceback, 100 wrote noise
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.xyz", "--precision", "1000000000"],
+         "precision must be an integer from 0 to 17 (decimals of x, y, z), got 1000000000"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.xyz", "--precision", "99999999999999999999999"], "from 0 to 17"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.xyz", "--precision", "100"], "from 0 to 17"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.xyz", "--precision", "18"], "from 0 to 17"),
+        (["convert", "{tmp}/a.xyz", "{tmp}/b.xyz", "--precision", "-1"], "from 0 to 17"),
+        # an integer option beyond the numba kernel's int64 was a TypingError traceback
+        (["segment", "{tmp}/a.xyz", "{tmp}/b.laz", "--min-size", "99999999999999999999999"],
+         "min_size must be an integer from 1 to 10^12, got 99999999999999999999999"),
+        # synth: an origin of 1e23 gave every point the same x; a density of 1e-300 wrote 0 points
+        (["synth", "plane", "{tmp}/s.laz", "--origin", "1e308,0,0"], "origin coordinates must be at most 1e+09"),
+        (["synth", "plane", "{tmp}/s.laz", "--origin", "0,1e23,0"], "origin coordinates must be at most 1e+09"),
+        (["synth", "plane", "{tmp}/s.laz", "--rotation", "1e308,0,0,0,1,0,0,0,1"], "rotation must be a proper"),
+        (["synth", "terrain", "{tmp}/s.laz", "--density", "1e-300"],
+         "terrain: the scene has no points at density 1e-300; raise the density"),
+        # demo: a bad seed left the empty output folder behind
+        (["demo", "--out", "{tmp}/demo_bad", "--seed", "-1"], "seed must be >= 0, got -1"),
+        (["demo", "--out", "{tmp}/demo_bad/sub", "--seed", "-1"], "seed must be >= 0, got -1"),
     ],
 )
 def test_cli_errors_in_process(tmp_path, capsys, argv, message):
@@ -171,6 +202,21 @@ def test_cli_errors_in_process(tmp_path, capsys, argv, message):
     assert err.count("\n") == 1 and err.startswith("lidarfx: error: ") and message in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.xyz"]
     assert (tmp_path / "a.xyz").read_text() == "1 2 3\n4 5 6\n"
+
+
+def test_text_precision_is_0_to_17_decimals(tmp_path):
+    """The library refuses it too (1e9 decimals tried a 4 GB line, 100 wrote rounding noise)."""
+    from lidarfx.errors import LidarfxError
+
+    cloud = lidarfx.PointCloud(np.array([[0.1, 2.0, 3.0], [500000.123, 5400000.456, 301.5]]))
+    for bad in (18, 100, 10**9, 10**23, -1, 2.5, True):
+        with pytest.raises(LidarfxError, match="precision must be an integer from 0 to 17"):
+            lidarfx.write(cloud, tmp_path / "p.xyz", precision=bad)
+    assert not (tmp_path / "p.xyz").exists()
+    lidarfx.write(cloud, tmp_path / "p.xyz", precision=17)
+    assert np.array_equal(read(tmp_path / "p.xyz").xyz, cloud.xyz)  # 17 decimals round-trip exactly
+    lidarfx.write(cloud, tmp_path / "p.xyz", precision=np.int64(0))
+    assert (tmp_path / "p.xyz").read_text().splitlines()[1:] == ["0 2 3", "500000 5400000 302"]
 
 
 def test_cli_subprocess_exit_code_and_one_line_error(tmp_path):

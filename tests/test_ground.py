@@ -250,6 +250,42 @@ def test_bad_parameters_and_empty_input():
     assert one.tolist() == [True]
 
 
+@pytest.mark.parametrize("share", [1.5, 1.0000001, -0.1, float("nan"), float("inf")])
+def test_edge_share_is_a_share_from_0_to_1(share):
+    """1.5 was accepted (no region can have more than all its boundary as steps: a silent no-op)."""
+    xyz = np.random.default_rng(0).random((50, 3))
+    with pytest.raises(LidarfxError, match="edge_share"):
+        classify_ground(xyz, edge_share=share)
+
+
+def test_edge_share_bounds_are_accepted():
+    xyz = np.random.default_rng(0).random((50, 3))
+    assert classify_ground(xyz, edge_share=0.0).shape == (50,)
+    assert classify_ground(xyz, edge_share=1.0).shape == (50,)
+
+
+@pytest.mark.parametrize("classes", [[256], [7, -1], [10**9], [10**23], [2.5], ["a"], 7, "7"])
+def test_ignore_classes_are_class_codes_0_to_255(classes):
+    """256, -1, 1e9 and a 23-digit code were accepted silently (they match no LAS class byte)."""
+    c = PointCloud(np.random.default_rng(0).random((50, 3)), {"classification": np.ones(50, np.uint8)})
+    with pytest.raises(LidarfxError, match="ignore_classes must be class codes from 0 to 255"):
+        classify_ground(c, ignore_classes=classes)
+    with pytest.raises(LidarfxError, match="ignore_classes must be class codes from 0 to 255"):
+        candidate_mask(c, ignore_classes=classes)
+    with pytest.raises(LidarfxError, match="ignore_classes must be class codes from 0 to 255"):
+        apply_ground_classification(c, np.zeros(50, bool), ignore_classes=classes)
+
+
+def test_ignore_classes_accepts_codes_arrays_and_none():
+    cls = np.array([0, 255, 7, 1] * 5, np.uint8)
+    c = PointCloud(np.random.default_rng(0).random((20, 3)), {"classification": cls})
+    assert candidate_mask(c, ignore_classes=[0, 255]).tolist() == (~np.isin(cls, [0, 255])).tolist()
+    assert candidate_mask(c, ignore_classes=np.array([7], np.uint8)).tolist() == (cls != 7).tolist()
+    assert candidate_mask(c, ignore_classes=None).all() and candidate_mask(c, ignore_classes=[]).all()
+    out = apply_ground_classification(c, np.zeros(20, bool), ignore_classes=(np.int64(255),))
+    assert out.meta["ground"]["ignore_classes"] == [255]
+
+
 # -------------------------------------------------------------- DTM and HAG
 def _plane(x, y):
     return 0.3 * x - 0.2 * y + 100.0
@@ -586,6 +622,35 @@ def test_cli_errors_exit_2(scene_file, tmp_path, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "lidarfx: error:" in err
+
+
+@pytest.mark.parametrize("opts, message", [
+    (["--edge-share", "1.5"], "edge_share is a share of the boundary from 0 to 1 (0 = off), got 1.5"),
+    (["--ignore-classes", "256"], "ignore_classes must be class codes from 0 to 255, got 256"),
+    (["--ignore-classes", "7,-1"], "ignore_classes must be class codes from 0 to 255, got -1"),
+    (["--ignore-classes", "99999999999999999999999"],
+     "ignore_classes must be class codes from 0 to 255, got 99999999999999999999999"),
+])
+def test_cli_edge_share_and_class_codes_are_checked(scene_file, tmp_path, capsys, opts, message):
+    """ground, ground-eval and dtm --classify refuse them before reading (they were accepted)."""
+    path, ref, cls = scene_file
+    assert main(["ground", str(path), str(tmp_path / "o.laz"), *opts]) == 2
+    assert main(["ground-eval", str(path), "--json", *opts]) == 2
+    assert main(["dtm", str(path), str(tmp_path / "o.tif"), "--classify", *opts]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.splitlines() == [f"lidarfx: error: {message}"] * 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.laz"]
+
+
+def test_tiny_resolution_message_is_short(scene_file, tmp_path, capsys):
+    """-r 1e-300 was refused with two ~300-digit cell counts in the message."""
+    path, ref, cls = scene_file
+    assert main(["dtm", str(path), str(tmp_path / "d.tif"), "-r", "1e-300", "-q"]) == 2
+    assert main(["ground", str(path), str(tmp_path / "o.laz"), "--dtm", str(tmp_path / "d.tif"), "-r", "1e-300", "-q"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and all(len(e) < 150 and "cells of 1e-300 is too large" in e for e in err), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.laz"]
 
 
 def test_points_with_nan_coordinates(tmp_path):

@@ -271,11 +271,29 @@ def test_min_width_releases_thin_strips():
         {"min_size": 0},
         {"min_size": 2.5},
         {"min_width": -0.1},
+        # integers beyond the numba kernel's int64 were a TypingError traceback
+        {"min_size": 99999999999999999999999},
+        {"min_size": 10**12 + 1},
+        {"min_size": float("inf")},
+        {"first_refit": 10**23},
+        {"first_refit": 2},
+        {"refit_max": 10**23},
+        {"refit_max": 0},
     ],
 )
 def test_bad_parameters(kw):
     with pytest.raises(LidarfxError):
         segment_planes(_two_parallel_planes(0.3), **kw)
+
+
+def test_integer_options_range_message_and_upper_bound():
+    cloud = _two_parallel_planes(0.3)
+    with pytest.raises(LidarfxError) as exc:
+        segment_planes(cloud, min_size=99999999999999999999999)
+    assert str(exc.value) == "min_size must be an integer from 1 to 10^12, got 99999999999999999999999"
+    # the largest min_size is valid: it releases every segment
+    out = segment_planes(cloud, min_size=10**12, first_refit=10**12, refit_max=10**12)
+    assert (out["segment_id"] == -1).all() and out.meta["segmentation"]["segments"] == 0
 
 
 def test_empty_or_wrong_input():
@@ -355,6 +373,10 @@ def test_cli_segment_errors(tmp_path, capsys):
     # a picture that cannot be written is refused before any work (no point cloud written)
     assert main(["segment", str(src), str(tmp_path / "o.laz"), "--picture", str(tmp_path / "no" / "p.png")]) == 2
     assert "output folder does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "o.laz").exists()
+    # an integer beyond the kernel's int64 was a numba TypingError traceback; refused before reading
+    assert main(["segment", str(src), str(tmp_path / "o.laz"), "--min-size", "99999999999999999999999"]) == 2
+    assert capsys.readouterr().err == "lidarfx: error: min_size must be an integer from 1 to 10^12, got 99999999999999999999999\n"
     assert not (tmp_path / "o.laz").exists()
     # a negative --top listed nothing and said nothing
     assert main(["segment", str(src), str(tmp_path / "o.laz"), "--top", "-1"]) == 2

@@ -84,6 +84,44 @@ def test_origin_shifts_points_only(kind):
     assert b.meta["truth"]["origin"] == o
 
 
+@pytest.mark.parametrize("kind", list(GENERATORS))
+@pytest.mark.parametrize("origin", [(1e308, 0, 0), (1e23, 0, 0), (0, -1.0000001e9, 0), (0, 0, 2e9)])
+def test_origin_beyond_1e9_is_refused(kind, origin):
+    """At 1e23 every point of a scene had the same x (float64 steps of 2^24 m): refused, one line."""
+    with pytest.raises(LidarfxError, match=r"origin coordinates must be at most 1e\+09 in absolute value"):
+        GENERATORS[kind](origin=origin)
+
+
+def test_origin_at_1e9_keeps_sub_mm_resolution():
+    o = (1e9, -1e9, 1e9)
+    a, b = synth.plane(seed=2), synth.plane(seed=2, origin=o)
+    np.testing.assert_allclose(b.xyz - np.array(o), a.xyz, rtol=0, atol=1e-6)  # float64 steps 1.2e-7 m
+    with pytest.raises(LidarfxError, match="scanner coordinates must be at most"):
+        synth.facade(scanner=(1e12, 0.0, 1.6))
+
+
+@pytest.mark.parametrize("value", [float("inf"), float("nan"), 1e308, 1e200, 2.0])
+def test_rotation_with_entries_outside_minus_1_1_is_one_error(value):
+    """inf / 1e308 entries printed a numpy RuntimeWarning (overflow in matmul) before the error."""
+    import warnings
+
+    m = np.eye(3)
+    m[0, 0] = value
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(LidarfxError, match="rotation must be a proper 3x3 rotation matrix"):
+            synth.plane(rotation=m)
+
+
+@pytest.mark.parametrize("kind, kw", [("terrain", {}), ("facade", {}), ("rockface", {}),
+                                      ("plane", {"query_point": False}), ("terrain", {"sampling": "random"})])
+def test_density_that_gives_no_points_is_refused(kind, kw):
+    """terrain at density 1e-300 wrote a 0-point file without a word (rockface: a numpy traceback)."""
+    with pytest.raises(LidarfxError) as exc:
+        GENERATORS[kind](density=1e-300, **kw)
+    assert str(exc.value) == f"{kind}: the scene has no points at density 1e-300; raise the density"
+
+
 def test_generate_rejects_unknown_kind_and_bad_parameters():
     with pytest.raises(LidarfxError, match="unknown synthetic scene"):
         synth.generate("house")

@@ -8,7 +8,8 @@ a half-written output or a modified input.  Three parts check it:
 
 * ``files``: every command on missing, folder, empty, garbage and truncated LAZ files, header-only
   text, NaN coordinates, word columns, and clouds of 0, 1 and 50 identical points;
-* ``options``: every numeric option of every command with 0, -1, nan, inf and 1e308;
+* ``options``: every numeric option of every command with 0, -1, nan, inf, 1e308 and 1e-300
+  (integer options: 0, -1, 10^9 and a 23-digit number);
 * ``synth``: every scene parameter of ``lidarfx synth -p KEY=VALUE`` with 0, -1, nan and 1e9.
 
 A run is BAD when it prints a traceback, exits with another code than 0 or 2, leaves output behind
@@ -151,6 +152,12 @@ def _subparsers(parser, prefix=()):
     yield prefix, parser
 
 
+INT_VALUES = ["0", "-1", "1000000000", "99999999999999999999999"]
+"""Values tried on every integer option (session 16 added the huge ones: allocations, hours, tracebacks)."""
+FLOAT_VALUES = ["0", "-1", "nan", "inf", "1e308", "1e-300"]
+"""Values tried on every float option (1e-300: squares that underflow, grid keys that overflow)."""
+
+
 def part_options(d, timeout, bad):
     from lidarfx.cli import build_parser
 
@@ -163,7 +170,7 @@ def part_options(d, timeout, bad):
         for a in sp._actions:
             if a.type not in (int, float) or not a.option_strings:
                 continue
-            for v in (["0", "-1"] if a.type is int else ["0", "-1", "nan", "inf", "1e308"]):
+            for v in (INT_VALUES if a.type is int else FLOAT_VALUES):
                 check([*prefix, *base[prefix], a.option_strings[-1], v], d, timeout, bad)
 
 

@@ -33,7 +33,7 @@ def register(subparsers: Any) -> None:
         "(e.g. x,y,z,intensity,-,classification)",
     )
     p.add_argument("--ascii", action="store_true", help="write PLY as text instead of binary")
-    p.add_argument("--precision", type=int, metavar="N", help="decimals of x, y, z in text output (default 3)")
+    p.add_argument("--precision", type=int, metavar="N", help="decimals of x, y, z in text output, 0..17 (default 3)")
     p.set_defaults(func=run)
 
 
@@ -53,7 +53,9 @@ def run(args: argparse.Namespace) -> int:
     if args.precision is not None:
         if out_format != "ascii":
             raise LidarfxError("--precision applies to text output (.xyz .txt .csv .pts) only")
-        opts["precision"] = args.precision
+        from ..io.ascii import check_precision
+
+        opts["precision"] = check_precision(args.precision)  # before reading
     cloud = read(args.input, columns=args.columns)
     write(cloud, args.output, **opts)
     print(f"{args.input} -> {args.output}: {len(cloud):,} points, {len(cloud.names)} attributes")

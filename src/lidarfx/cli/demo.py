@@ -35,23 +35,39 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import numpy as np
     from rich.console import Console
-    from rich.table import Table
 
-    from .. import io, synth
+    from .. import synth
     from ..errors import LidarfxError
-    from ..features import compute_features
-    from ..render import feature_views
 
     console = Console(stderr=True)
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise LidarfxError(f"cannot create output folder {out}: {exc.strerror}") from None
     t0 = time.perf_counter()
-    scene = synth.facade(seed=args.seed)
+    scene = synth.facade(seed=args.seed)  # checks the seed before the folder is made
+    created = next((p for p in reversed([out, *out.parents]) if not p.exists()), None)  # topmost new folder
+    try:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise LidarfxError(f"cannot create output folder {out}: {exc.strerror}") from None
+        _run(console, out, scene, t0)
+    except BaseException:
+        if created is not None:  # no folder left behind by a failed run
+            import shutil
+
+            shutil.rmtree(created, ignore_errors=True)
+        raise
+    return 0
+
+
+def _run(console, out: Path, scene, t0: float) -> None:
+    import numpy as np
+    from rich.table import Table
+
+    from .. import io
+    from ..features import compute_features
+    from ..render import feature_views
+
     io.write(scene, out / "facade.laz")
     radii = [0.1, 0.3, 0.5]
     console.print(f"[bold]lidarfx demo[/]: {len(scene):,} points, features at radii {radii} m")
@@ -104,4 +120,3 @@ def run(args) -> int:
         f"features {t2 - t1:.2f} s, write {t3 - t2:.2f} s -> {out}/ "
         "(facade.laz, facade_features.laz, facade_features.png, summary.json)"
     )
-    return 0

@@ -74,7 +74,7 @@ def _add_params(p) -> None:
 
 def _params(args) -> dict:
     """The SMRF options, checked at once (also where they go unused: ``dtm`` without ``--classify``)."""
-    from ..ground import _check_params
+    from ..ground import _check_params, check_ignore_classes
 
     p = {
         "cell": args.cell,
@@ -86,6 +86,7 @@ def _params(args) -> dict:
         "edge_share": args.edge_share,
     }
     _check_params(p)
+    check_ignore_classes(args.ignore_classes)
     return {**p, "last_returns": not args.all_returns}
 
 

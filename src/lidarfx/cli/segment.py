@@ -86,6 +86,11 @@ def run(args) -> int:
         raise LidarfxError(f"--top is the number of segments listed, 0 or more; got {args.top}")
     if args.picture:
         check_picture_path(args.picture)
+    from ..segment.planes import _check_params
+
+    # the library's checks, before reading the cloud
+    _check_params(args.normal_radius, args.max_distance, args.growing_radius, args.max_angle, args.min_size,
+                  args.min_width)
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
     t1 = time.perf_counter()

@@ -30,6 +30,7 @@ __all__ = [
     "classify_ground",
     "apply_ground_classification",
     "candidate_mask",
+    "check_ignore_classes",
     "dtm",
     "height_above_ground",
     "ground_errors",
@@ -62,7 +63,7 @@ def candidate_mask(
     > 0), last returns only (``return_number == number_of_returns``)."""
     xyz, attrs = _xyz_attrs(cloud)
     cand = np.all(np.isfinite(xyz), axis=1)
-    ign = list(ignore_classes or [])
+    ign = check_ignore_classes(ignore_classes)
     if ign and "classification" in attrs:
         cand &= ~np.isin(attrs["classification"], ign)
     if last_returns and "return_number" in attrs and "number_of_returns" in attrs:
@@ -80,6 +81,30 @@ def _check_params(p: dict[str, float]) -> None:
     for name in ("slope", "threshold", "scalar", "edge_step", "edge_share"):
         if not (np.isfinite(p[name]) and p[name] >= 0):
             raise LidarfxError(f"{name} must be a non-negative number, got {p[name]!r}")
+    if p["edge_share"] > 1:
+        raise LidarfxError(f"edge_share is a share of the boundary from 0 to 1 (0 = off), got {p['edge_share']!r}")
+
+
+def check_ignore_classes(classes: Iterable[int] | None) -> list[int]:
+    """``ignore_classes`` as a list of class codes 0..255 (``None`` = none)."""
+    if classes is None:
+        return []
+    if isinstance(classes, (str, bytes)):
+        raise LidarfxError(f"ignore_classes must be class codes from 0 to 255, got {classes!r}")
+    try:
+        values = list(classes)
+    except TypeError:
+        raise LidarfxError(f"ignore_classes must be class codes from 0 to 255, got {classes!r}") from None
+    out = []
+    for c in values:
+        try:
+            ok = not isinstance(c, (bool, np.bool_)) and int(c) == c and 0 <= int(c) <= 255
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise LidarfxError(f"ignore_classes must be class codes from 0 to 255, got {c!r}")
+        out.append(int(c))
+    return out
 
 
 def classify_ground(
@@ -152,7 +177,7 @@ def classify_ground(
     cells = (ext[0] / cell + 1) * (ext[1] / cell + 1)
     if cells > MAX_CELLS:
         raise LidarfxError(
-            f"the cloud spans {ext[0]:.0f} x {ext[1]:.0f} m: {cells:.3g} cells of {cell} m is too many; "
+            f"the cloud spans {ext[0]:g} x {ext[1]:g} m: {cells:.3g} cells of {cell:g} m is too many; "
             "cut it into tiles or use a larger cell"
         )
     spec = GridSpec(local[:, :2], cell)
@@ -182,17 +207,18 @@ def apply_ground_classification(
     """
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("apply_ground_classification needs a PointCloud")
+    check_ignore_classes(ignore_classes)
     if ground is None:
         ground = classify_ground(cloud, ignore_classes=ignore_classes, **params)
     params = {k: v for k, v in params.items() if k in DEFAULTS}
     ground = np.asarray(ground, dtype=bool)
     if ground.shape != (len(cloud),):
         raise LidarfxError(f"ground mask must have length {len(cloud)}")
+    ign = check_ignore_classes(ignore_classes)
     out = cloud.copy()
     old = out.get("classification")
     dtype = old.dtype if old is not None else np.uint8
     cls = np.full(len(out), NON_GROUND_CLASS, dtype=dtype)
-    ign = list(ignore_classes or [])
     if old is not None and ign:
         keep = np.isin(old, ign)
         cls[keep] = old[keep]

@@ -136,8 +136,8 @@ def dtm(
     y0 = math.floor(lo[1] / r) * r
     cols = max(1, int(math.floor((hi[0] - x0) / r)) + 1)
     rows = max(1, int(math.floor((hi[1] - y0) / r)) + 1)
-    if rows * cols > 400_000_000:
-        raise LidarfxError(f"DTM of {rows} x {cols} cells is too large; use a coarser resolution or tiles")
+    if rows * cols > 400_000_000:  # :g: at -r 1e-300 the counts have ~300 digits
+        raise LidarfxError(f"DTM of {rows:g} x {cols:g} cells of {r:g} is too large; use a coarser resolution or tiles")
     ytop = y0 + rows * r
     # local frame: origin at the south-west corner of the grid
     cx = (np.arange(cols) + 0.5) * r

@@ -22,7 +22,7 @@ Reading
 
 Writing
     A header line of names, then ``x y z`` with ``precision`` decimals
-    (default 3 = millimetres) and the attributes: integers as integers,
+    (0 .. 17, default 3 = millimetres) and the attributes: integers as integers,
     float32 with 7 and float64 with 15 significant digits.  Space-separated,
     comma-separated for ``.csv``.
 """
@@ -37,6 +37,9 @@ from ..cloud import PointCloud
 from ..errors import LidarfxError
 
 ACCEPTS_COLUMNS = True
+MAX_PRECISION = 17
+"""Most decimals of x, y, z in text output: float64 holds 17 significant digits, so more
+decimals only print rounding noise (and 10^9 decimals tried a 4 GB line)."""
 READ_ERRORS = (ValueError, UnicodeDecodeError, OSError)
 
 SKIP_NAMES = frozenset({"-", "skip"})
@@ -198,6 +201,15 @@ def _format(arr: np.ndarray) -> str:
     raise LidarfxError(f"cannot write attribute values of dtype {arr.dtype} as text")
 
 
+def check_precision(precision) -> int:
+    """The ``precision`` of :func:`write`: an integer number of decimals 0 .. :data:`MAX_PRECISION`."""
+    if isinstance(precision, (bool, np.bool_)) or not isinstance(precision, (int, np.integer)) \
+            or not 0 <= precision <= MAX_PRECISION:
+        raise LidarfxError(f"precision must be an integer from 0 to {MAX_PRECISION} (decimals of x, y, z), "
+                           f"got {precision!r}")
+    return int(precision)
+
+
 def write(
     cloud: PointCloud,
     path: Path,
@@ -213,8 +225,7 @@ def write(
     ``delimiter`` defaults to ``","`` for ``.csv`` and ``" "`` otherwise;
     ``header=False`` omits the line of names (e.g. for tools expecting raw Oakland files).
     """
-    if not isinstance(precision, int) or precision < 0:
-        raise LidarfxError(f"precision must be a non-negative integer, got {precision!r}")
+    check_precision(precision)
     delim = delimiter if delimiter is not None else ("," if ext == ".csv" else " ")
     names = cloud.names
     bad = [n for n in names if (delim.strip() or " ") in n or not n.strip() or n != n.strip() or " " in n]

@@ -175,18 +175,39 @@ def _grow(
 # ----------------------------------------------------------------------------
 # Python side
 # ----------------------------------------------------------------------------
-def _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, refit_fraction, first_refit):
+MAX_COUNT = 10**12
+"""Largest value of the integer options (``min_size``, ``first_refit``, ``refit_max``): more
+points than any cloud holds, and far inside the int64 of the numba kernel."""
+
+
+def _check_int(name: str, value: Any, lo: int) -> int:
+    """An integer in ``lo ..`` :data:`MAX_COUNT` (the numba kernel takes int64: a 23-digit value was a
+    TypingError traceback)."""
+    try:
+        v = int(value)
+        ok = not isinstance(value, bool) and v == value and lo <= v <= MAX_COUNT
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise LidarfxError(f"{name} must be an integer from {lo} to 10^12, got {value!r}")
+    return v
+
+
+def _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width=0.0, *,
+                  first_refit=10, refit_fraction=0.10, refit_max=1000):
+    """Every option of :func:`segment_planes` (the CLI runs this before it reads the cloud)."""
     for name, v in (("normal_radius", normal_radius), ("max_distance", max_distance), ("growing_radius", growing_radius)):
         if not (isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) and v > 0):
             raise LidarfxError(f"{name} must be a positive number (m), got {v!r}")
     if not (0 < max_angle < 90):
         raise LidarfxError(f"max_angle must be between 0 and 90 degrees, got {max_angle!r}")
-    if int(min_size) != min_size or min_size < 1:
-        raise LidarfxError(f"min_size must be an integer >= 1, got {min_size!r}")
+    _check_int("min_size", min_size, 1)
     if not (0 < refit_fraction <= 10):
         raise LidarfxError(f"refit_fraction must be in (0, 10], got {refit_fraction!r}")
-    if int(first_refit) != first_refit or first_refit < 3:
-        raise LidarfxError(f"first_refit must be an integer >= 3, got {first_refit!r}")
+    _check_int("first_refit", first_refit, 3)
+    if not (isinstance(min_width, (int, float, np.floating, np.integer)) and math.isfinite(min_width) and min_width >= 0):
+        raise LidarfxError(f"min_width must be a number >= 0 (m), got {min_width!r}")
+    _check_int("refit_max", refit_max, 1)
 
 
 def segment_planes(
@@ -260,11 +281,8 @@ def segment_planes(
 
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("segment_planes expects a PointCloud (see lidarfx.read)")
-    _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, refit_fraction, first_refit)
-    if not (math.isfinite(min_width) and min_width >= 0):
-        raise LidarfxError(f"min_width must be a number >= 0 (m), got {min_width!r}")
-    if int(refit_max) < 1:
-        raise LidarfxError(f"refit_max must be >= 1, got {refit_max!r}")
+    _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width,
+                  first_refit=first_refit, refit_fraction=refit_fraction, refit_max=refit_max)
     n = len(cloud)
     if n == 0:
         raise LidarfxError("the point cloud is empty")

@@ -118,14 +118,26 @@ def check_sampling(sampling: str) -> str:
     return sampling
 
 
+MAX_COORDINATE = 1e9
+"""Largest absolute coordinate of an ``origin`` or a scanner position (m): float64 steps
+are 1.2e-7 m up to 1e9, so the points keep sub-mm resolution (at 1e23 every point of a
+scene had the same x)."""
+
+
 def check_point(name: str, value: Any) -> np.ndarray:
-    """Three finite numbers as a float64 array (an ``origin``, a scanner position, ...)."""
+    """Three finite numbers of at most :data:`MAX_COORDINATE` as a float64 array (an
+    ``origin``, a scanner position, ...)."""
     try:
         o = np.asarray(value, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         raise LidarfxError(f"{name} must be three numbers, got {value!r}") from None
     if o.shape != (3,) or not np.all(np.isfinite(o)):
         raise LidarfxError(f"{name} must be three finite numbers, got {value!r}")
+    if np.any(np.abs(o) > MAX_COORDINATE):
+        raise LidarfxError(
+            f"{name} coordinates must be at most {MAX_COORDINATE:g} in absolute value (float64 would lose "
+            f"the mm resolution), got {', '.join(f'{v:g}' for v in o)}"
+        )
     return o
 
 
@@ -166,7 +178,9 @@ def resolve_rotation(rotation: Any, rng: np.random.Generator) -> np.ndarray | No
         raise LidarfxError(f"rotation must be None, 'random' or a 3x3 matrix, got {rotation!r}") from None
     if m.size == 9:
         m = m.reshape(3, 3)
-    if m.shape != (3, 3) or not np.allclose(m @ m.T, np.eye(3), atol=1e-6) or np.linalg.det(m) < 0:
+    # entries of a rotation are in [-1, 1]: checked first, so NaN / inf / 1e308 never reach the product
+    if m.shape != (3, 3) or not np.all(np.abs(m) <= 1.0 + 1e-6) \
+            or not np.allclose(m @ m.T, np.eye(3), atol=1e-6) or np.linalg.det(m) < 0:
         raise LidarfxError("rotation must be a proper 3x3 rotation matrix (orthonormal, det +1)")
     return m
 
@@ -437,6 +451,13 @@ class Scene:
         return xyz, attrs
 
 
+def no_points(name: str, params: Mapping[str, Any]) -> LidarfxError:
+    """The refusal of a scene without points (a density so low that every part rounds to 0 points)."""
+    density = params.get("density")
+    at = f" at density {float(density):g}" if isinstance(density, (int, float, np.number)) else ""
+    return LidarfxError(f"{name}: the scene has no points{at}; raise the density")
+
+
 def finish(name: str, xyz: np.ndarray, attrs: Mapping[str, np.ndarray], truth: Mapping[str, Any],
            params: Mapping[str, Any], origin: np.ndarray) -> PointCloud:
     """Shift by ``origin`` and wrap as a :class:`PointCloud` with ``meta["truth"]``.
@@ -444,6 +465,8 @@ def finish(name: str, xyz: np.ndarray, attrs: Mapping[str, np.ndarray], truth: M
     ``truth`` coordinates stay *local* (relative to ``truth["origin"]``), like
     LAS offsets: world = local + origin.
     """
+    if len(xyz) == 0:
+        raise no_points(name, params)
     full = {"generator": name, "params": dict(params), "origin": origin, **truth}
     return PointCloud(
         np.asarray(xyz, dtype=np.float64) + origin,

@@ -36,6 +36,7 @@ from ._common import (
     finish,
     isolated_outliers,
     make_rng,
+    no_points,
     normal_from_dip,
     plane_basis,
     sample_plane_over_rect,
@@ -225,6 +226,8 @@ def rockface(
         add_facet(2, "roof", p, [(i * cw + gap, (i + 1) * cw - gap), (y_out + gap, y_out + depth - gap)])
         roof_ids += list(range(before, len(facets)))
 
+    if scene.n == 0:
+        raise no_points("rockface", params)
     xyz, attrs = scene.arrays()
     xyz = add_noise(rng, xyz, noise)
     n_facet_points = len(xyz)
