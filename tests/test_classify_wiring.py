@@ -592,10 +592,27 @@ def test_bad_histogram_bins_are_refused_before_training(bins):
     ({"n_jobs": -1}, "n_jobs must be a number of threads"),
     ({"radii": [1e-300]}, "radii must be at least 1e-09"),  # ZeroDivisionError in the thinning
     ({"scanner": [float("nan"), 0, 0]}, "scanner must be three finite numbers"),
+    ({"max_disc_points": 1e-300}, "max_disc_points must be at least 1 point per disc"),  # thinned the cloud away
 ])
 def test_training_options_out_of_range_are_refused(opts, message):
     with pytest.raises(LidarfxError, match=message):
         TrainConfig(**opts)
+
+
+def test_thinning_keeps_at_least_one_disc_of_points():
+    """A disc far wider than the cloud (-r 1e9) asked for a density that kept no point, and training
+    said "the point cloud is empty"; the thinning now keeps about max_disc_points points, and
+    leaves ordinary thinning alone (the same mask)."""
+    from lidarfx.classify.pipeline import point_density, thinning_mask
+
+    xyz = np.random.default_rng(3).uniform(0, 50, (20_000, 3))
+    tiny = 125.0 / (np.pi * 1e18)
+    assert thinning_mask(xyz, tiny).sum() == 0  # what it did
+    kept = thinning_mask(xyz, tiny, min_keep=125).sum()
+    assert 80 < kept < 170
+    half = point_density(xyz) / 2
+    np.testing.assert_array_equal(thinning_mask(xyz, half), thinning_mask(xyz, half, min_keep=125))
+    assert thinning_mask(xyz, tiny, min_keep=50_000) is None  # would keep everything: no thinning
 
 
 @pytest.mark.parametrize("opts, message", [

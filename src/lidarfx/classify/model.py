@@ -154,6 +154,9 @@ class TrainConfig:
                 raise LidarfxError(f"hag_cap must be a positive height in m or None, got {self.hag_cap}")
         if self.max_disc_points is not None:
             self.max_disc_points = float(self.max_disc_points)
+            if not self.max_disc_points >= 1:  # fewer than one point per disc thinned the cloud away
+                raise LidarfxError(f"max_disc_points must be at least 1 point per disc (or None: never thin), "
+                                   f"got {self.max_disc_points:g}")
         self.terrain_augment = int(self.terrain_augment or 0)
         if not 0 <= self.terrain_augment <= MAX_TERRAIN_COPIES:
             raise LidarfxError(f"terrain_augment must be a number of copies from 0 to {MAX_TERRAIN_COPIES}, "

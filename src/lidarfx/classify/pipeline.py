@@ -445,7 +445,9 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     limit = None
                     if self.max_disc_points is not None and rs:
                         limit = float(self.max_disc_points) / (math.pi * rs[0] * rs[0])  # float: no OverflowError
-                    cache[key] = thinning_mask(xyz, limit if limit else None)  # 0 for absurd radii: no thinning
+                    # 0 for absurd radii: no thinning; never fewer points than one disc should hold
+                    cache[key] = thinning_mask(xyz, limit if limit else None,
+                                               min_keep=int(min(self.max_disc_points or 0, 1e9)))
                 keep = cache[key]
                 req = Request(tuple(slots), ())
                 held = cache.get("index")
@@ -579,14 +581,19 @@ def _cap32(cap: float | None) -> np.float32:
     return np.float32(cap)
 
 
-def thinning_mask(xyz: np.ndarray, max_density: float | None, seed: int = 0) -> np.ndarray | None:
-    """Random subset (bool mask) bringing the density down to ``max_density``; None if not needed."""
+def thinning_mask(xyz: np.ndarray, max_density: float | None, seed: int = 0, min_keep: int = 0) -> np.ndarray | None:
+    """Random subset (bool mask) bringing the density down to ``max_density``; None if not needed.
+    It keeps about ``min_keep`` points at least (a disc far wider than the cloud asked for a
+    density that left no point: ``-r 1e9`` said "the point cloud is empty")."""
     if max_density is None:
         return None
     d = point_density(xyz)
     if d <= max_density:
         return None
-    return np.random.default_rng(seed).random(len(xyz)) < (max_density / d)
+    frac = max(max_density / d, min(1.0, min_keep / max(len(xyz), 1)))
+    if frac >= 1.0:
+        return None
+    return np.random.default_rng(seed).random(len(xyz)) < frac
 
 
 def pulse_ids(cloud: PointCloud) -> np.ndarray | None:
