@@ -12,14 +12,22 @@ class LidarfxWarning(UserWarning):
     """Something the user should know about a result (the CLI prints it as one line)."""
 
 
-def check_seed(seed) -> int:
-    """A random seed as numpy, numba and scikit-learn take it: an integer in 0 .. 2**32 - 1
-    (the one rule of every seeded option: ``classify --seed``, ``features --seed``)."""
+def check_int(name: str, value, lo: int, hi: int, *, hi_text: str | None = None, note: str = "") -> int:
+    """``value`` as an int in ``lo .. hi`` (an integral float passes; bools, strings and 23-digit
+    numbers that no kernel can take do not), else the one-line error
+    "NAME must be an integer from LO to HI[NOTE], got VALUE"."""
     try:
-        v = int(seed)
-        ok = v == seed and 0 <= v < 2**32
+        v = int(value)
+        is_bool = isinstance(value, bool) or getattr(getattr(value, "dtype", None), "kind", "") == "b"
+        ok = not is_bool and v == value and lo <= v <= hi
     except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
-        raise LidarfxError(f"seed must be an integer from 0 to {2**32 - 1}, got {seed!r}")
+        raise LidarfxError(f"{name} must be an integer from {lo} to {hi_text or hi}{note}, got {value!r}")
     return v
+
+
+def check_seed(seed) -> int:
+    """A random seed as numpy, numba and scikit-learn take it: an integer in 0 .. 2**32 - 1
+    (the one rule of every seeded option: ``classify --seed``, ``features --seed``)."""
+    return check_int("seed", seed, 0, 2**32 - 1)

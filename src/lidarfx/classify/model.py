@@ -189,10 +189,9 @@ class TrainConfig:
             raise LidarfxError(f"n_estimators is the number of trees (rf) or boosting iterations (hgb), from 1 to "
                                f"{MAX_ESTIMATORS}; got {self.n_estimators} for classifier {self.classifier!r}")
         feature_list(self.features, self.radii, self.neighbourhood, self.k)  # validates
-        from ..features.api import MAX_HIST_BINS
+        from ..features.api import check_hist_bins
 
-        if not (isinstance(self.hist_bins, (int, np.integer)) and 2 <= self.hist_bins <= MAX_HIST_BINS):
-            raise LidarfxError(f"hist_bins must be an integer from 2 to {MAX_HIST_BINS}, got {self.hist_bins!r}")
+        self.hist_bins = check_hist_bins(self.hist_bins)
 
     def feature_params(self) -> dict[str, Any]:
         return {"features": self.features, "radii": list(self.radii), "neighbourhood": self.neighbourhood,

@@ -8,7 +8,7 @@ import numba as nb
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import LidarfxError, check_seed
+from ..errors import LidarfxError, check_int, check_seed
 from ..neighbors import NeighborIndex, default_cell_for_knn, ring_buffer_size
 from ..progress import bar, wanted
 from . import slots as S
@@ -100,6 +100,11 @@ _KNN_ENTRIES = 4_000_000
 """kNN distances are found for blocks of queries of at most this many (query, neighbour) pairs."""
 
 
+def check_hist_bins(hist_bins) -> int:
+    """The bins of the height-difference histogram: 2 .. :data:`MAX_HIST_BINS`."""
+    return check_int("hist_bins", hist_bins, 2, MAX_HIST_BINS)
+
+
 def check_options(req, rs, neighbourhood="sphere", k=None, convention="default", hist_bins=10, height=None, *,
                   d_max=0.10, msac_threshold=None, msac_iterations=100, seed=0, scanner=None) -> None:
     """Every parameter check of :func:`feature_arrays` (request ``req``, radii
@@ -115,8 +120,7 @@ def check_options(req, rs, neighbourhood="sphere", k=None, convention="default",
     for name, v in (("d_max (the plane inlier distance)", d_max), ("msac_threshold", msac_threshold)):
         if v is not None and not (isinstance(v, (int, float, np.integer, np.floating)) and 0 < v < math.inf):
             raise LidarfxError(f"{name} must be a positive finite distance, got {v!r}")
-    if not (isinstance(msac_iterations, (int, np.integer)) and 1 <= msac_iterations <= 1_000_000):
-        raise LidarfxError(f"msac_iterations must be an integer from 1 to 1000000, got {msac_iterations!r}")
+    check_int("msac_iterations", msac_iterations, 1, 1_000_000)
     if neighbourhood not in NEIGHBOURHOODS:
         raise LidarfxError(f"neighbourhood must be one of {', '.join(NEIGHBOURHOODS)}, got {neighbourhood!r}")
     if convention not in CONVENTIONS:
@@ -136,8 +140,7 @@ def check_options(req, rs, neighbourhood="sphere", k=None, convention="default",
         raise LidarfxError("give a radius (e.g. radius=0.5) or several radii")
     elif len(set(_suffixes(rs))) < len(rs):
         raise LidarfxError(f"radii {rs} give the same attribute suffix (2 decimals); use radii that differ when rounded to 2 decimals")
-    if not (isinstance(hist_bins, (int, np.integer)) and 2 <= hist_bins <= MAX_HIST_BINS):
-        raise LidarfxError(f"hist_bins must be an integer from 2 to {MAX_HIST_BINS}, got {hist_bins!r}")
+    check_hist_bins(hist_bins)
     if height is not None and not height > 0:
         raise LidarfxError("cylinder height limit must be > 0")
 

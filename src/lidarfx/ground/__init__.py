@@ -207,14 +207,13 @@ def apply_ground_classification(
     """
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("apply_ground_classification needs a PointCloud")
-    check_ignore_classes(ignore_classes)
+    ign = check_ignore_classes(ignore_classes)  # before the filter runs
     if ground is None:
         ground = classify_ground(cloud, ignore_classes=ignore_classes, **params)
     params = {k: v for k, v in params.items() if k in DEFAULTS}
     ground = np.asarray(ground, dtype=bool)
     if ground.shape != (len(cloud),):
         raise LidarfxError(f"ground mask must have length {len(cloud)}")
-    ign = check_ignore_classes(ignore_classes)
     out = cloud.copy()
     old = out.get("classification")
     dtype = old.dtype if old is not None else np.uint8

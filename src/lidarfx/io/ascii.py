@@ -34,7 +34,7 @@ from typing import Iterator
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import LidarfxError
+from ..errors import LidarfxError, check_int
 
 ACCEPTS_COLUMNS = True
 MAX_PRECISION = 17
@@ -203,11 +203,7 @@ def _format(arr: np.ndarray) -> str:
 
 def check_precision(precision) -> int:
     """The ``precision`` of :func:`write`: an integer number of decimals 0 .. :data:`MAX_PRECISION`."""
-    if isinstance(precision, (bool, np.bool_)) or not isinstance(precision, (int, np.integer)) \
-            or not 0 <= precision <= MAX_PRECISION:
-        raise LidarfxError(f"precision must be an integer from 0 to {MAX_PRECISION} (decimals of x, y, z), "
-                           f"got {precision!r}")
-    return int(precision)
+    return check_int("precision", precision, 0, MAX_PRECISION, note=" (decimals of x, y, z)")
 
 
 def write(

@@ -45,7 +45,7 @@ import numpy as np
 from .. import _json
 from .._atomic import atomic_path
 from ..cloud import PointCloud
-from ..errors import LidarfxError
+from ..errors import LidarfxError, check_int
 from ..features.eigen import eigh3
 from ..neighbors import NeighborIndex, column_ranges, ring_buffer_size
 from . import DEFAULTS, TABLE_COLUMNS
@@ -183,14 +183,7 @@ points than any cloud holds, and far inside the int64 of the numba kernel."""
 def _check_int(name: str, value: Any, lo: int) -> int:
     """An integer in ``lo ..`` :data:`MAX_COUNT` (the numba kernel takes int64: a 23-digit value was a
     TypingError traceback)."""
-    try:
-        v = int(value)
-        ok = not isinstance(value, bool) and v == value and lo <= v <= MAX_COUNT
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok:
-        raise LidarfxError(f"{name} must be an integer from {lo} to 10^12, got {value!r}")
-    return v
+    return check_int(name, value, lo, MAX_COUNT, hi_text="10^12")
 
 
 def _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width=0.0, *,
