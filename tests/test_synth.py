@@ -124,7 +124,7 @@ def test_density_that_gives_no_points_is_refused(kind, kw):
 
 def test_generate_rejects_unknown_kind_and_bad_parameters():
     with pytest.raises(LidarfxError, match="unknown synthetic scene"):
-        synth.generate("house")
+        synth.generate("castle")
     with pytest.raises(LidarfxError, match="does not take"):
         synth.generate("facade", radius=1.0)
     for bad in ({"density": -1}, {"density": "abc"}, {"sampling": "poisson"}, {"rotation": np.ones((3, 3))},
@@ -485,7 +485,7 @@ def test_cli_list_and_errors(tmp_path, capsys):
     for name in GENERATORS:
         assert name in listed
     with pytest.raises(LidarfxError, match="unknown synthetic scene"):
-        _cli(["house", str(tmp_path / "x.laz")])
+        _cli(["castle", str(tmp_path / "x.laz")])
     with pytest.raises(LidarfxError, match="does not take"):
         _cli(["facade", str(tmp_path / "x.laz"), "--radius", "1"])
     with pytest.raises(LidarfxError):

@@ -134,6 +134,8 @@ COMMANDS = {
     ("classify", "predict"): ["{IN}", "out/o.laz", "--model", "m.skops", "-q"],
     ("classify", "train"): ["{IN}", "--model", "out/x.skops", "--classes", "2,5,6", "-q"],
     ("classify", "evaluate"): ["{IN}", "--cv", "2", "--out", "out/ev", "--no-random-folds", "-q"],
+    ("eigenclass",): ["{IN}", "out/o.laz", "-r", "1", "-q"],
+    ("edges",): ["{IN}", "out/o.geojson", "-r", "1", "--csv", "--dxf", "out/o.dxf", "-q"],
 }
 
 

@@ -18,6 +18,8 @@ __all__ = [
     "compute_features",
     "segment_planes",
     "classify_ground",
+    "classify_structures",
+    "extract_edges",
     "__version__",
 ]
 
@@ -36,7 +38,15 @@ def __getattr__(name: str):
         from .ground import classify_ground
 
         return classify_ground
-    if name in ("synth", "select", "segment", "ground"):
+    if name == "classify_structures":
+        from .structures import classify_structures
+
+        return classify_structures
+    if name == "extract_edges":
+        from .edges import extract_edges
+
+        return extract_edges
+    if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

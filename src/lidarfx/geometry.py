@@ -7,6 +7,7 @@ rule).  Normals are flipped up before converting.
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -127,3 +128,75 @@ def group_hull_areas(xy: np.ndarray, groups: np.ndarray) -> np.ndarray:
     x = xy[order, 0] - xy[first, 0][g]
     y = xy[order, 1] - xy[first, 1][g]
     return hull_areas(x, y, starts.astype(np.int64), ends.astype(np.int64))
+
+
+def ransac_plane(points: np.ndarray, threshold: float, *, iterations: int = 200, seed: int = 0,
+                 alive: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The dominant plane of a small point set by MSAC: ``(centroid, unit normal flipped up,
+    inlier mask)`` or ``None`` (fewer than 3 points).
+
+    ``iterations`` random triples propose planes scored by Σ min(e², t²) (Torr &
+    Zisserman 2000); the best one's inliers (distance ≤ ``threshold``) are refitted
+    by PCA twice.  ``alive`` restricts the search to those points.  Meant for the
+    few hundred to few thousand points around a line or a patch.
+    """
+    if not (threshold > 0 and math.isfinite(threshold)):
+        raise LidarfxError(f"plane inlier distance must be a positive number, got {threshold!r}")
+    p = np.asarray(points, dtype=np.float64)
+    idx = np.flatnonzero(np.ones(len(p), bool) if alive is None else np.asarray(alive, bool))
+    if len(idx) < 3:
+        return None
+    o = p[idx].mean(axis=0)
+    q = p[idx] - o
+    rng = np.random.default_rng(seed)
+    tri = rng.integers(0, len(idx), size=(int(iterations), 3))
+    a, b, c = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
+    n = np.cross(b - a, c - a)
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 1e-12
+    if not ok.any():
+        return None
+    n = n[ok] / norm[ok, None]
+    a = a[ok]
+    t2 = threshold * threshold
+    best, best_cost = 0, np.inf
+    for h0 in range(0, len(n), 64):  # blocks bound the (hypotheses × points) matrix
+        e = (q @ n[h0:h0 + 64].T) - (a[h0:h0 + 64] * n[h0:h0 + 64]).sum(axis=1)
+        cost = np.minimum(e * e, t2).sum(axis=0)
+        k = int(np.argmin(cost))
+        if cost[k] < best_cost:
+            best, best_cost = h0 + k, float(cost[k])
+    normal, point = n[best], a[best]
+    inl = np.zeros(len(p), bool)
+    centroid = point + o
+    for _ in range(2):
+        d = np.abs((p[idx] - o - point) @ normal)
+        sel = idx[d <= threshold]
+        if len(sel) < 3:
+            return None
+        inl[:] = False
+        inl[sel] = True
+        centroid, normal, _ = fit_plane(p[sel] - o)
+        point = centroid
+        centroid = centroid + o
+    d = np.abs((p[idx] - centroid) @ normal)
+    inl[:] = False
+    inl[idx[d <= threshold]] = True
+    return centroid, normal, inl
+
+
+def intersect_planes(c1: Any, n1: Any, c2: Any, n2: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """Line of two planes (point, normal each): ``(point nearest to the midpoint of c1 and c2,
+    unit direction)``, or ``None`` for (nearly) parallel planes (< 1° apart)."""
+    c1, n1, c2, n2 = (np.asarray(v, dtype=np.float64) for v in (c1, n1, c2, n2))
+    n1, n2 = unit(n1), unit(n2)
+    d = np.cross(n1, n2)
+    s = float(np.linalg.norm(d))
+    if s < math.sin(math.radians(1.0)):
+        return None
+    d = d / s
+    # the point x minimising |x - m|² subject to n1·x = n1·c1, n2·x = n2·c2
+    m = 0.5 * (c1 + c2)
+    a = np.array([n1, n2, d])
+    rhs = np.array([n1 @ c1, n2 @ c2, d @ m])
+    return np.linalg.solve(a, rhs), d

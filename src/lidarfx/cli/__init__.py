@@ -12,13 +12,16 @@ import warnings
 
 from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
-COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify"]
+COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
+                   "eigenclass", "edges"]
 
 EPILOG = """examples:
   lidarfx demo                                   # run the main job on the bundled sample
   lidarfx info scan.laz --json                   # points, bounds, classes, CRS
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
   lidarfx synth facade facade.laz --seed 1       # generate a scene with ground truth
+  lidarfx eigenclass roofs.laz struct.laz -r 1.5 # plane / border / edge / corner / line / volume
+  lidarfx edges roofs.laz lines.geojson --dxf lines.dxf --csv
 """
 
 

@@ -120,3 +120,17 @@ def check_picture_path(path: str) -> None:
     if Path(path).suffix.lower() != ".png":
         raise LidarfxError(f"picture {path}: pictures are PNG files; give a path ending in .png")
     check_output_folder(path)
+
+
+def emit_summary(args, summary: dict, printer) -> None:
+    """The end of a command: the summary as JSON on stdout with ``--json``, else
+    ``printer(summary)`` (a table on stderr) unless ``-q``."""
+    import sys
+
+    from .. import _json
+
+    if getattr(args, "json", False):
+        _json.dump(summary, sys.stdout, indent=2)
+        print()
+    elif not getattr(args, "quiet", False):
+        printer(summary)

@@ -117,7 +117,10 @@ def _raster_cells(u: np.ndarray, v: np.ndarray, pixels: int, cell: float | None)
 
 
 CLASS_COLOURS = {"ground": "#b08040", "vegetation": "#2e9e3e", "building": "#d6453d", "water": "#3b7dd8",
-                 "wire": "#9b4fc4", "pole": "#555555", "roof": "#e07b39", "wall": "#d6453d"}
+                 "wire": "#9b4fc4", "pole": "#555555", "roof": "#e07b39", "wall": "#d6453d",
+                 # structure classes (lidarfx eigenclass)
+                 "isolated": "#000000", "plane": "#e6dfc8", "plane_border": "#1f77b4", "edge": "#d62728",
+                 "corner": "#9467bd", "line": "#2ca02c", "line_end": "#17becf", "volume": "#556b2f"}
 """Colours of common class names in :func:`class_raster` and :func:`error_map` (others: the tab10 cycle)."""
 
 NOT_CLASSIFIED = (0.78, 0.78, 0.78)
@@ -378,4 +381,86 @@ def segment_view(
         _label_axes(ax, xl, yl)
     if title:
         axes[0, npan - 1].set_title(title, fontsize=9)
+    return _save(fig, path, dpi)
+
+
+def _offset_text(v: float) -> str:
+    """``− 630,240`` / ``+ 21`` / empty: what was subtracted from a plotted coordinate."""
+    if v == 0:
+        return ""
+    return f"− {v:,.0f}" if v > 0 else f"+ {-v:,.0f}"
+
+
+LINE_COLOURS = {"edge": "#d62728", "border": "#1f77b4", "reference": "#2ca02c"}
+"""Colours of polyline kinds in :func:`lines_view` (other kinds: the tab10 cycle)."""
+
+
+def lines_view(
+    cloud: PointCloud,
+    lines: Sequence,
+    path: str | Path,
+    *,
+    reference: Sequence[np.ndarray] | None = None,
+    reference_label: str = "reference",
+    window: tuple[float, float, float, float] | None = None,
+    pixels: int = 900,
+    title: str | None = None,
+    dpi: int = 110,
+) -> Path:
+    """Plan view of 3-D polylines over the points: a grey raster of the highest point per
+    cell (darker = higher), every polyline in the colour of its ``kind`` (edge red, border
+    blue) and, when given, ``reference`` polylines ((k, 2 or 3) arrays, world x/y) as wide
+    translucent green lines under them.  ``window`` = (x_min, y_min, x_max, y_max) in world
+    coordinates zooms in.  Axes are metres relative to the window's (or cloud's) minimum."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xyz = cloud.xyz
+    if window is not None:
+        x0, y0, x1, y1 = (float(v) for v in window)
+        keep = (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1)
+        xyz = xyz[keep]
+    else:
+        x0, y0 = (float(v) for v in xyz[:, :2].min(axis=0)) if len(xyz) else (0.0, 0.0)
+        x1, y1 = (float(v) for v in xyz[:, :2].max(axis=0)) if len(xyz) else (1.0, 1.0)
+    fig_w = 8.0
+    span_x, span_y = max(x1 - x0, 1e-9), max(y1 - y0, 1e-9)
+    fig, ax = plt.subplots(figsize=(fig_w, max(3.0, min(fig_w * span_y / span_x, 1.4 * fig_w)) + 0.4))
+    if len(xyz):
+        u, v = xyz[:, 0] - x0, xyz[:, 1] - y0
+        cell, nu, nv, pix = _raster_cells(np.r_[u, 0.0, span_x], np.r_[v, 0.0, span_y], pixels, None)
+        pix = pix[:-2]
+        order = np.lexsort((xyz[:, 2], pix))
+        top = order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]]
+        img = np.full(nu * nv, np.nan)
+        img[pix[top]] = xyz[top, 2]
+        lo, hi = np.nanpercentile(img, [2, 98]) if np.isfinite(img).any() else (0.0, 1.0)
+        ax.imshow(img.reshape(nv, nu), origin="lower", interpolation="nearest", cmap="Greys", vmin=lo - 0.5 * (hi - lo),
+                  vmax=hi, extent=(0, nu * cell, 0, nv * cell))
+    for ref in reference or []:
+        r = np.asarray(ref, dtype=np.float64)
+        ax.plot(r[:, 0] - x0, r[:, 1] - y0, "-", lw=5, alpha=0.45, color=LINE_COLOURS["reference"], solid_capstyle="round")
+    tab = plt.get_cmap("tab10")
+    kinds: dict[str, list[float]] = {}
+    for pl in lines:
+        ring = pl.ring
+        if window is not None and not ((ring[:, 0] >= x0) & (ring[:, 0] <= x1) & (ring[:, 1] >= y0) & (ring[:, 1] <= y1)).any():
+            continue
+        colour = LINE_COLOURS.get(pl.kind, tab(len(kinds) % 10))
+        ax.plot(ring[:, 0] - x0, ring[:, 1] - y0, "-", lw=1.3, color=colour)
+        kinds.setdefault(pl.kind, []).append(pl.length)
+    handles = [plt.Line2D([], [], color=LINE_COLOURS.get(k, tab(i % 10)), lw=2, label=f"{k}: {len(v)} lines, {sum(v):,.0f} m")
+               for i, (k, v) in enumerate(sorted(kinds.items()))]
+    if reference:
+        handles.append(plt.Line2D([], [], color=LINE_COLOURS["reference"], lw=5, alpha=0.45, label=reference_label))
+    if handles:
+        ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.85)
+    ax.set_xlim(0, span_x)
+    ax.set_ylim(0, span_y)
+    ax.set_aspect("equal")
+    _label_axes(ax, f"x (East) {_offset_text(x0)} [m]", f"y (North) {_offset_text(y0)} [m]")
+    if title:
+        ax.set_title(title, fontsize=9)
     return _save(fig, path, dpi)

@@ -22,6 +22,7 @@ rockface        TLS rock face: facets of 3 joint sets, overhang, noise
 powerline       ALS corridor: terrain, pylons, 3 spans × 3 catenary wires, trees
 tower           TLS lattice steel tower: legs, braces, arms, bolts
 terrain         ALS ground with a dike and a ditch and their breaklines
+house           ALS gable-roof house on ground with its ridge, eave and verge lines
 ==============  =============================================================
 """
 from __future__ import annotations
@@ -30,12 +31,15 @@ from typing import Callable
 
 from ..cloud import PointCloud
 from .facade import FACADE_CLASSES, facade
+from .house import HOUSE_CLASSES, house
 from .powerline import POWERLINE_CLASSES, catenary_through, catenary_z, powerline
 from .rockface import DEFAULT_JOINT_SETS, rockface
 from .structures import (
     STRUCTURE_IDS,
+    analytic_centroid_offset,
     analytic_eigenvalues,
     corner,
+    density_for_count,
     edge,
     line,
     line_end,
@@ -59,6 +63,7 @@ GENERATORS: dict[str, Callable[..., PointCloud]] = {
     "powerline": powerline,
     "tower": tower,
     "terrain": terrain,
+    "house": house,
 }
 """Generator name -> function (used by ``lidarfx synth``)."""
 
@@ -104,12 +109,16 @@ __all__ = [
     "powerline",
     "tower",
     "terrain",
+    "house",
     "analytic_eigenvalues",
+    "analytic_centroid_offset",
+    "density_for_count",
     "catenary_z",
     "catenary_through",
     "lattice_members",
     "STRUCTURE_IDS",
     "FACADE_CLASSES",
+    "HOUSE_CLASSES",
     "POWERLINE_CLASSES",
     "DEFAULT_JOINT_SETS",
     "PARTS",

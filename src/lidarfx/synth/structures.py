@@ -47,6 +47,9 @@ __all__ = [
     "line_end",
     "volume",
     "analytic_eigenvalues",
+    "analytic_centroid_offset",
+    "density_for_count",
+    "STRUCTURE_MEASURE",
 ]
 
 STRUCTURE_IDS: dict[str, int] = {
@@ -148,6 +151,34 @@ def analytic_eigenvalues(kind: str, angle: float = 90.0) -> list[float]:
     mean, m2 = _moments(kind, angle)
     ev = np.linalg.eigvalsh(m2 - np.outer(mean, mean))[::-1]
     return [float(max(v, 0.0)) if abs(v) > 1e-15 else 0.0 for v in ev]
+
+
+def analytic_centroid_offset(kind: str, angle: float = 90.0) -> float:
+    """|c − p| / R: distance of the centroid of a uniform noise-free sample of ``kind`` inside
+    the sphere of radius R from the query point, divided by R (e.g. ``plane_border`` →
+    4/(3π), ``line_end`` → 1/2, ``plane`` → 0)."""
+    mean, _ = _moments(kind, angle)
+    return float(np.linalg.norm(mean))
+
+
+STRUCTURE_MEASURE = {
+    "plane": math.pi,
+    "plane_border": math.pi / 2,
+    "edge": math.pi,
+    "corner": 3 * math.pi / 4,
+    "line": 2.0,
+    "line_end": 1.0,
+    "volume": 4 * math.pi / 3,
+}
+"""Measure of each structure inside the unit sphere (area in R², length in R, volume in R³):
+``density × measure × R^dim`` is the expected number of points in the sphere of radius R."""
+
+
+def density_for_count(kind: str, count: float, radius: float = 1.0) -> float:
+    """The ``density`` that puts ``count`` points (expected) into the sphere of ``radius``
+    around the query point of the structure ``kind``."""
+    dim = {"surface": 2, "line": 1, "volume": 3}[_KIND_DIM[kind]]
+    return float(count) / (STRUCTURE_MEASURE[kind] * radius**dim)
 
 
 def _structure(kind: str, params: dict[str, Any], *, radius: float, density: float | None,

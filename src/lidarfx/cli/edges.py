@@ -1,0 +1,176 @@
+"""``lidarfx edges IN lines.geojson``: 3-D building edge lines from the structure classes."""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ._args import add_columns, check_picture_path, emit_summary, columns_of
+
+EPILOG = """examples:
+  lidarfx edges roofs.laz lines.geojson                              # radius from the point spacing
+  lidarfx edges roofs.laz lines.geojson --dxf lines.dxf --csv --picture lines.png
+  lidarfx edges roofs.laz lines.geojson -r 1.5 --min-length 2
+  lidarfx eigenclass roofs.laz struct.laz -r 1.5 && \\
+    lidarfx edges struct.laz lines.geojson -r 1.5 --use-structure    # reuse the classes
+  lidarfx edges roofs.laz lines.geojson --cloud candidates.laz       # points with structure, edge_candidate
+
+steps: structure classes (lidarfx eigenclass) -> plane border, edge and corner
+points -> connected components -> RANSAC line segments -> each segment placed
+with the cloud around it (two planes intersected, or one plane's border) ->
+collinear segments merged -> chained into 3-D polylines -> Douglas-Peucker.
+outputs: GeoJSON LineString Z (CRS of the LAS header), optional DXF 3-D
+polylines (layers EDGE, BORDER), CSV table (one row per line: length, support,
+RMS, ends ...) and JSON with the vertices, a plan-view picture.
+Lengths (--threshold, --link, ...) are in coordinate units, default multiples
+of the radius; docs/edges.md.
+"""
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "edges",
+        help="3-D building edge lines (ridges, eaves, steps) as GeoJSON / DXF / CSV",
+        description="Extract 3-D edge lines from border and edge points (doc 002, SPEC §5).",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("input", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.npz)")
+    p.add_argument("output", help="lines as GeoJSON (.geojson or .json)")
+    p.add_argument("-r", "--radius", type=float, default=None, help="radius of classification and refinement (default: from the point spacing)")
+    p.add_argument("--dxf", default=None, metavar="DXF", help="also write the lines as DXF 3-D polylines")
+    p.add_argument("--csv", nargs="?", const="", default=None, metavar="CSV",
+                   help="also write the per-line table (default path: OUTPUT with .csv) and its JSON with the vertices")
+    p.add_argument("--picture", default=None, metavar="PNG", help="also draw the lines over the points (plan view)")
+    p.add_argument("--cloud", default=None, metavar="OUT", help="also write the cloud with structure and edge_candidate")
+    p.add_argument("--use-structure", action="store_true", help="use the input's structure attribute (from lidarfx eigenclass)")
+    p.add_argument("--references", default="trained", help="references of the classification (see lidarfx eigenclass)")
+    p.add_argument("--labels", default="plane_border,edge,corner", help="structure labels of the candidate points, default %(default)s")
+    p.add_argument("--min-length", type=float, default=None, help="shortest line kept (default: the radius)")
+    p.add_argument("--min-points", type=int, default=8, help="fewest candidate points of a segment, default %(default)s")
+    p.add_argument("--threshold", type=float, default=None, help="RANSAC inlier distance (default: 0.5 × radius)")
+    p.add_argument("--link", type=float, default=None, help="link distance of the components (default: 0.5 × radius)")
+    p.add_argument("--join", type=float, default=None, help="largest gap between segment ends that are chained (default: the radius)")
+    p.add_argument("--simplify", type=float, default=None, help="Douglas-Peucker tolerance (default: 0.1 × radius)")
+    p.add_argument("--no-refine", action="store_true", help="keep the band lines, do not place them with the cloud")
+    p.add_argument("--keep-unrefined", action="store_true", help="keep segments whose placement failed")
+    p.add_argument("--keep-cloud-border", action="store_true", help="keep lines along the cloud's outer boundary")
+    p.add_argument("--seed", type=int, default=0, help="seed of the RANSAC draws, default %(default)s")
+    add_columns(p)
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
+    p.set_defaults(func=run)
+
+
+def _paths(args) -> dict[str, str | None]:
+    from .._atomic import check_not_same_file, check_output_folder
+    from ..errors import LidarfxError
+    from ..io import check_output_path
+
+    out = Path(args.output)
+    if out.suffix.lower() not in (".geojson", ".json"):
+        raise LidarfxError(f"{args.output}: the lines are GeoJSON; give a path ending in .geojson")
+    paths: dict[str, str | None] = {"geojson": args.output, "dxf": args.dxf, "csv": None, "json": None,
+                                    "picture": args.picture, "cloud": args.cloud}
+    if args.dxf is not None and Path(args.dxf).suffix.lower() != ".dxf":
+        raise LidarfxError(f"{args.dxf}: give a DXF path ending in .dxf")
+    if args.csv is not None:
+        csv = args.csv or str(out.with_suffix(".csv"))
+        if Path(csv).suffix.lower() != ".csv":
+            raise LidarfxError(f"{csv}: give a table path ending in .csv")
+        paths["csv"] = csv
+        paths["json"] = str(Path(csv).with_suffix(".lines.json"))
+    if args.picture:
+        check_picture_path(args.picture)
+    if args.cloud:
+        check_not_same_file(args.input, args.cloud)
+        check_output_path(args.cloud)
+    given = [str(Path(v).resolve()) for v in paths.values() if v]
+    if len(set(given)) < len(given):
+        raise LidarfxError("two outputs have the same path; give each output its own file")
+    for v in paths.values():
+        if v:
+            check_not_same_file(args.input, v)
+            check_output_folder(v)
+    return paths
+
+
+def run(args) -> int:
+    from .. import io
+    from ..edges import extract_edges
+    from ..ground.dtm import cloud_crs
+    from ..vector import export_lines
+
+    paths = _paths(args)
+    labels = [s.strip() for s in args.labels.split(",") if s.strip()]
+    progress = False if args.quiet else None
+    t0 = time.perf_counter()
+    cloud = io.read(args.input, columns=columns_of(args), progress=progress)
+    t1 = time.perf_counter()
+    res = extract_edges(cloud, args.radius, labels=labels, use_structure=args.use_structure, references=args.references,
+                        link=args.link, threshold=args.threshold, min_points=args.min_points, min_length=args.min_length,
+                        refine=not args.no_refine, keep_unrefined=args.keep_unrefined,
+                        keep_cloud_border=args.keep_cloud_border, join=args.join, simplify=args.simplify,
+                        seed=args.seed, progress=progress)
+    t2 = time.perf_counter()
+    meta = {k: v for k, v in res.meta.items() if k != "seconds"}
+    meta["input"] = str(args.input)
+    written = export_lines(res.lines, geojson=paths["geojson"], dxf=paths["dxf"], csv=paths["csv"], json=paths["json"],
+                           crs=cloud_crs(cloud), meta=meta)
+    if paths["cloud"]:
+        io.write(res.cloud, paths["cloud"], progress=progress)
+        written["cloud"] = paths["cloud"]
+    if paths["picture"]:
+        from ..render import lines_view
+
+        lines_view(res.cloud, res.lines, paths["picture"],
+                   title=f"{Path(args.input).name}: {len(res.lines)} edge lines, r = {res.meta['radius']:g}")
+        written["picture"] = paths["picture"]
+    t3 = time.perf_counter()
+    kinds: dict[str, dict[str, float]] = {}
+    for pl in res.lines:
+        k = kinds.setdefault(pl.kind, {"lines": 0, "length": 0.0})
+        k["lines"] += 1
+        k["length"] = round(k["length"] + pl.length, 3)
+    summary = {
+        "input": str(args.input),
+        "outputs": written,
+        "points": len(cloud),
+        "radius": res.meta["radius"],
+        "candidates": res.meta["candidates"],
+        "components": res.meta["components"],
+        "segments": res.meta["segments"],
+        "refined_segments": res.meta["refined_segments"],
+        "lines": len(res.lines),
+        "total_length": res.meta["total_length"],
+        "kinds": kinds,
+        "longest": [{"kind": pl.kind, "length": round(pl.length, 3), "support": pl.support,
+                     "rms": None if pl.rms != pl.rms else round(pl.rms, 4), "vertices": pl.n_vertices}
+                    for pl in res.lines[:10]],
+        "parameters": res.meta["parameters"],
+        "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},
+    }
+    emit_summary(args, summary, _print_summary)
+    return 0
+
+
+def _print_summary(s: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(stderr=True)
+    console.print(f"[bold]{s['lines']:,}[/] lines, {s['total_length']:,.1f} m in total, from {s['candidates']:,} "
+                  f"candidate points of {s['points']:,} (r = {s['radius']:g}) -> {s['outputs']['geojson']}")
+    if s["longest"]:
+        t = Table(title=f"longest {len(s['longest'])} lines", title_justify="left")
+        for col in ("kind", "length m", "points", "RMS m", "vertices"):
+            t.add_column(col, justify="left" if col == "kind" else "right")
+        for r in s["longest"]:
+            t.add_row(r["kind"], f"{r['length']:.2f}", f"{r['support']:,}", "" if r["rms"] is None else f"{r['rms']:.3f}",
+                      str(r["vertices"]))
+        console.print(t)
+    others = [v for k, v in s["outputs"].items() if k != "geojson"]
+    if others:
+        console.print("also: " + ", ".join(others))
+    sec = s["seconds"]
+    console.print("  ".join(f"{k} {v:.2f} s" for k, v in sec.items()))
