@@ -199,7 +199,7 @@ def test_toronto_city_hall_outline():
     laz, shp = REAL / "TO_core_last_zoom.laz", REAL / "TO_city_hall.shp"
     if not laz.exists() or not shp.exists():
         pytest.skip("TO_core_last_zoom.laz / TO_city_hall.shp are not in ../shared/data/real")
-    shapefile = pytest.importorskip("shapefile", reason="pyshp reads the reference outline")
+    import shapefile  # pyshp (a test dependency) reads the reference outline
     from shapely.geometry import LineString, MultiLineString
 
     res = extract_edges(lidarfx.read(laz))

@@ -54,7 +54,7 @@ def test_crs_name_epsg_wkt_none():
 
 
 def test_crs_name_from_wkt_via_pyproj():
-    pyproj = pytest.importorskip("pyproj")
+    import pyproj
     wkt = pyproj.CRS.from_epsg(2154).to_wkt()
     assert crs_name({"wkt": wkt, "epsg": None, "geographic": False, "unit_to_metre": 1.0}) \
         == "urn:ogc:def:crs:EPSG::2154"
@@ -75,7 +75,6 @@ def test_crs_name_from_real_la93_header():
     assert crs is not None and crs["epsg"] == 2154
     assert crs_name(crs) == "urn:ogc:def:crs:EPSG::2154"
     # the WKT alone (no EPSG key) gives the same code through pyproj
-    pytest.importorskip("pyproj")
     assert crs_name({**crs, "epsg": None}) == "urn:ogc:def:crs:EPSG::2154"
 
 
@@ -207,7 +206,7 @@ def test_read_geojson_refuses_large_file_before_reading(tmp_path, monkeypatch):
 
 # ------------------------------------------------------------------ DXF
 def test_dxf_content(tmp_path):
-    ezdxf = pytest.importorskip("ezdxf")
+    import ezdxf
     lines = _lines() + [Polyline(np.array([[0, 0, 0], [1, 1, 1.0]]), kind="tower/member")]
     write_dxf(lines, tmp_path / "lines.dxf")
     doc = ezdxf.readfile(tmp_path / "lines.dxf")
@@ -227,7 +226,7 @@ def test_dxf_content(tmp_path):
 
 
 def test_dxf_fixed_layer_and_empty(tmp_path):
-    ezdxf = pytest.importorskip("ezdxf")
+    import ezdxf
     write_dxf(_lines(), tmp_path / "one.dxf", layer="Lidar lines")
     doc = ezdxf.readfile(tmp_path / "one.dxf")
     assert {p.dxf.layer for p in doc.modelspace().query("POLYLINE")} == {"Lidar lines"}

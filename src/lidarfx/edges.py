@@ -386,12 +386,18 @@ def _refine_all(segments: list[LineSegment], cand: np.ndarray, local: np.ndarray
     return out, len(kept_fixed.segs)
 
 
+def _along(s: LineSegment, step: float, before: float = 0.0, after: float = 0.0) -> np.ndarray:
+    """Points on the line of ``s`` from ``before`` ahead of its start to ``after`` past its end,
+    at most ``step`` apart (both ends included)."""
+    span = s.length + before + after
+    n = max(int(math.ceil(span / step)), 1) + 1
+    return s.start + np.linspace(-before, s.length + after, n)[:, None] * s.direction
+
+
 def _band_support(s: LineSegment, cand_index, threshold: float) -> float:
     """Share of the segment's length (sampled every ``threshold / 2``) with a candidate point
     within ``threshold``."""
-    n = max(int(math.ceil(s.length / (0.5 * threshold))), 1) + 1
-    samples = s.start + np.linspace(0.0, s.length, n)[:, None] * s.direction
-    return float(np.mean(cand_index.count(samples, threshold) > 0))
+    return float(np.mean(cand_index.count(_along(s, 0.5 * threshold), threshold) > 0))
 
 
 def _grow(s: LineSegment, cand: np.ndarray, cand_index, threshold: float, max_gap: float, *,
@@ -403,10 +409,8 @@ def _grow(s: LineSegment, cand: np.ndarray, cand_index, threshold: float, max_ga
     the indices of the points along the grown segment (``extend=False``: along ``s`` as it is)."""
     d = s.direction
     L = s.length
-    reach = max(L, 10.0 * max_gap)
-    n = int(math.ceil((L + 2 * reach) / threshold)) + 1
-    samples = s.start + np.linspace(-reach, L + reach, n)[:, None] * d
-    _, ids, _ = cand_index.query_radius(samples, 1.5 * threshold)
+    reach = max(L, 10.0 * max_gap) if extend else 0.0
+    _, ids, _ = cand_index.query_radius(_along(s, threshold, reach, reach), 1.5 * threshold)
     ids = np.unique(ids)
     q = cand[ids] - s.start
     t = q @ d
@@ -477,10 +481,7 @@ def _tube(seg: LineSegment, local: np.ndarray, index, r: float) -> np.ndarray:
     """Indices of the cloud's points within ``r`` of the segment (its ends extended by r/2)."""
     L = seg.length
     d = seg.direction
-    n = max(int(math.ceil((L + r) / (0.5 * r))), 1)
-    t = np.linspace(-0.5 * r, L + 0.5 * r, n + 1)
-    samples = seg.start + t[:, None] * d
-    offsets, ids, _ = index.query_radius(samples + index.origin, r)
+    offsets, ids, _ = index.query_radius(_along(seg, 0.5 * r, 0.5 * r, 0.5 * r) + index.origin, r)
     ids = np.unique(ids)
     q = local[ids] - seg.start
     tt = q @ d

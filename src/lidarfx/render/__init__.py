@@ -116,6 +116,14 @@ def _raster_cells(u: np.ndarray, v: np.ndarray, pixels: int, cell: float | None)
     return cell, nu, nv, iv * nu + iu
 
 
+def _top_of_cells(pix: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """Index of the point with the largest ``key`` in every occupied raster cell ``pix``."""
+    order = np.lexsort((key, pix))
+    if not len(order):
+        return order
+    return order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]]
+
+
 CLASS_COLOURS = {"ground": "#b08040", "vegetation": "#2e9e3e", "building": "#d6453d", "water": "#3b7dd8",
                  "wire": "#9b4fc4", "pole": "#555555", "roof": "#e07b39", "wall": "#d6453d",
                  # structure classes (lidarfx eigenclass)
@@ -149,8 +157,7 @@ def class_raster(
     cell, nu, nv, pix = _raster_cells(xy[:, 0], xy[:, 1], pixels, cell)
     tab = plt.get_cmap("tab10")
     ccol = np.array([to_rgb(CLASS_COLOURS.get(str(n).lower(), tab(i % 10))) for i, n in enumerate(class_names)])
-    order = np.lexsort((z, pix))
-    top = order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]] if len(order) else order
+    top = _top_of_cells(pix, z)
     img = np.ones((nu * nv, 3))
     ok = (cls[top] >= 0) & (cls[top] < k)
     img[pix[top[ok]]] = ccol[cls[top[ok]]]
@@ -343,9 +350,7 @@ def segment_view(
     cell, nu, nv, pix = _raster_cells(xyz[:, a], xyz[:, b], pixels, cell)
     # nearest to the viewer: highest z from the top, smallest depth from front/side
     near = xyz[:, 2] if view == "top" else -xyz[:, depth_axis]
-    order = np.lexsort((near, pix))
-    last = np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1] if len(order) else np.zeros(0, np.int64)
-    win = order[last]
+    win = _top_of_cells(pix, near)
     img = np.ones((nv * nu, 3))
     nid = int(ids.max(initial=-1)) + 1
     # saturated random colours (never grey: grey is for unsegmented points)
@@ -432,8 +437,7 @@ def lines_view(
         u, v = xyz[:, 0] - x0, xyz[:, 1] - y0
         cell, nu, nv, pix = _raster_cells(np.r_[u, 0.0, span_x], np.r_[v, 0.0, span_y], pixels, None)
         pix = pix[:-2]
-        order = np.lexsort((xyz[:, 2], pix))
-        top = order[np.r_[np.flatnonzero(np.diff(pix[order])), len(order) - 1]]
+        top = _top_of_cells(pix, xyz[:, 2])
         img = np.full(nu * nv, np.nan)
         img[pix[top]] = xyz[top, 2]
         lo, hi = np.nanpercentile(img, [2, 98]) if np.isfinite(img).any() else (0.0, 1.0)

@@ -56,7 +56,7 @@ def crs_name(crs: Any) -> str | None:
     """The name for the GeoJSON ``crs`` member from a :func:`lidarfx.ground.dtm.cloud_crs` dict.
 
     EPSG code known → ``"urn:ogc:def:crs:EPSG::<code>"``; only a WKT → its EPSG code
-    by pyproj (when installed, confidence ≥ 70 %) as URN, else the WKT itself (GDAL
+    by pyproj (confidence ≥ 70 %) as URN, else the WKT itself (GDAL
     reads any SRS text there); ``None`` → ``None``.  A string is returned as it is
     (e.g. the name :func:`read_geojson` gives back), an int taken as an EPSG code.
     """
@@ -80,10 +80,8 @@ def crs_name(crs: Any) -> str | None:
     if not isinstance(wkt, str) or not wkt.strip():
         return None
     wkt = wkt.strip()
-    try:
-        import pyproj
-    except ImportError:
-        return wkt
+    import pyproj
+
     try:
         code = pyproj.CRS.from_wkt(wkt).to_epsg(min_confidence=70)
     except Exception:  # pyproj cannot parse it: GDAL may still
