@@ -136,6 +136,7 @@ COMMANDS = {
     ("classify", "evaluate"): ["{IN}", "--cv", "2", "--out", "out/ev", "--no-random-folds", "-q"],
     ("eigenclass",): ["{IN}", "out/o.laz", "-r", "1", "-q"],
     ("edges",): ["{IN}", "out/o.geojson", "-r", "1", "--csv", "--dxf", "out/o.dxf", "-q"],
+    ("powerlines",): ["{IN}", "out/pl", "--load-case", "temp=80", "-q"],
 }
 
 

@@ -20,6 +20,7 @@ __all__ = [
     "classify_ground",
     "classify_structures",
     "extract_edges",
+    "extract_powerlines",
     "__version__",
 ]
 
@@ -46,7 +47,11 @@ def __getattr__(name: str):
         from .edges import extract_edges
 
         return extract_edges
-    if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector"):
+    if name == "extract_powerlines":
+        from .powerlines import extract_powerlines
+
+        return extract_powerlines
+    if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector", "powerlines"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

@@ -31,6 +31,7 @@ from ..cloud import PointCloud, measurement_flags
 from ..errors import LidarfxError, LidarfxWarning, check_seed
 from ..features.api import check_options, radii_list, scale_suffix
 from ..features import slots as S
+from ..ground.dtm import unit_to_metre
 
 __all__ = [
     "CloudSample",
@@ -564,14 +565,6 @@ def point_density(xyz: np.ndarray, cell: float = 2.0) -> float:
     else:
         occupied = len(np.unique(key))
     return float(len(xyz)) / (occupied * cell * cell)
-
-
-def unit_to_metre(cloud: PointCloud) -> float:
-    """Metres per coordinate unit from the LAS header's CRS (1.0 for metres or an unknown unit)."""
-    from ..ground.dtm import cloud_crs
-
-    u = (cloud_crs(cloud) or {}).get("unit_to_metre")
-    return float(u) if u and u > 0 else 1.0
 
 
 def _cap32(cap: float | None) -> np.float32:

@@ -13,7 +13,7 @@ import warnings
 from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
 COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
-                   "eigenclass", "edges"]
+                   "eigenclass", "edges", "powerlines"]
 
 EPILOG = """examples:
   lidarfx demo                                   # run the main job on the bundled sample
@@ -22,6 +22,7 @@ EPILOG = """examples:
   lidarfx synth facade facade.laz --seed 1       # generate a scene with ground truth
   lidarfx eigenclass roofs.laz struct.laz -r 1.5 # plane / border / edge / corner / line / volume
   lidarfx edges roofs.laz lines.geojson --dxf lines.dxf --csv
+  lidarfx powerlines corridor.laz out/ --load-case temp=80   # wires, catenaries, sag, clearances
 """
 
 

@@ -11,7 +11,7 @@ from ..errors import LidarfxError
 from .raster import Raster
 from .tin import TIN_TILE_POINTS, tin_interpolate
 
-__all__ = ["dtm", "height_above_ground", "ground_mask_of", "cloud_crs"]
+__all__ = ["dtm", "height_above_ground", "ground_mask_of", "cloud_crs", "unit_to_metre"]
 
 GROUND_CLASS = 2
 
@@ -37,6 +37,12 @@ def cloud_crs(cloud: PointCloud) -> dict[str, Any] | None:
         "geographic": bool(info.get("geographic")),
         "unit_to_metre": info.get("unit_to_metre"),
     }
+
+
+def unit_to_metre(cloud: PointCloud) -> float:
+    """Metres per coordinate unit from the LAS header's CRS (1.0 for metres or an unknown unit)."""
+    u = (cloud_crs(cloud) or {}).get("unit_to_metre")
+    return float(u) if u and u > 0 else 1.0
 
 
 def ground_mask_of(cloud: PointCloud, ground: Any = None) -> np.ndarray:

@@ -468,3 +468,75 @@ def lines_view(
     if title:
         ax.set_title(title, fontsize=9)
     return _save(fig, path, dpi)
+
+
+def powerline_view(result, path: str | Path, *, title: str | None = None, max_profiles: int = 12,
+                   dpi: int = 110) -> Path:
+    """Plan view of a power-line result (points grey by height, pylons red, each
+    conductor's catenary in its own colour) above one profile per span (horizontal
+    distance along the span against height: the conductors' points and curves and the
+    ground under them).  ``result`` is a :class:`lidarfx.powerlines.PowerLines`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cloud = result.cloud
+    xyz = cloud.xyz
+    spans = result.spans[:max_profiles]
+    ncol = 2 if len(spans) > 1 else 1
+    nrow = int(math.ceil(len(spans) / ncol))
+    ext = np.ptp(xyz[:, :2], axis=0) if len(xyz) else np.ones(2)
+    plan_h = float(np.clip(10.0 * ext[1] / max(ext[0], 1e-9), 2.5, 9.0))
+    fig = plt.figure(figsize=(11, plan_h + 0.8 + 2.6 * nrow))
+    gs = fig.add_gridspec(1 + nrow, ncol, height_ratios=[plan_h + 0.8] + [2.6] * nrow)
+    ax = fig.add_subplot(gs[0, :])
+    x0, y0 = (float(v) for v in xyz[:, :2].min(axis=0)) if len(xyz) else (0.0, 0.0)
+    if len(xyz):
+        step = max(1, len(xyz) // 200_000)
+        q = xyz[::step]
+        ax.scatter(q[:, 0] - x0, q[:, 1] - y0, s=0.2, c=q[:, 2], cmap="Greys", alpha=0.5, linewidths=0, rasterized=True)
+    cls = np.asarray(cloud["classification"]) if "classification" in cloud else None
+    if cls is not None and (cls == 15).any():
+        p = xyz[cls == 15]
+        ax.scatter(p[:, 0] - x0, p[:, 1] - y0, s=1.5, c="#d62728", linewidths=0, label="pylon points")
+    tab = plt.get_cmap("tab20")
+    for cd in result.conductors:
+        cv = cd.curve(1.0)
+        ax.plot(cv[:, 0] - x0, cv[:, 1] - y0, "-", lw=0.9, color=tab(cd.bundle_id % 20))
+    for p in result.pylons:
+        ax.plot(p["position"][0] - x0, p["position"][1] - y0, "^", color="#d62728", ms=7, mec="k")
+        ax.annotate(f"P{p['id']}", (p["position"][0] - x0, p["position"][1] - y0), fontsize=7, xytext=(4, 4),
+                    textcoords="offset points")
+    ax.set_aspect("equal")
+    _label_axes(ax, f"x (East) {_offset_text(x0)} [m]", f"y (North) {_offset_text(y0)} [m]")
+    ax.set_title(title or f"{len(result.conductors)} conductors, {len(result.spans)} spans, {len(result.pylons)} pylons",
+                 fontsize=9)
+    for k, sp in enumerate(spans):
+        a2 = fig.add_subplot(gs[1 + k // ncol, k % ncol])
+        cds = [cd for cd in result.conductors if cd.span_id == sp["id"]]
+        if not cds:
+            continue
+        ref = cds[0]
+        for cd in cds:
+            pts = xyz[cd.index]
+            s = (pts[:, :2] - ref.start[:2]) @ ref.direction
+            a2.plot(s, pts[:, 2], ".", ms=1.2, color=tab(cd.bundle_id % 20), alpha=0.5)
+            cv = cd.curve(1.0)
+            a2.plot((cv[:, :2] - ref.start[:2]) @ ref.direction, cv[:, 2], "-", lw=0.8, color="k")
+        if result.objects is not None and len(result.objects):
+            ob = result.objects
+            so = (ob[:, :2] - ref.start[:2]) @ ref.direction
+            do = np.abs((ob[:, :2] - ref.start[:2]) @ np.array([-ref.direction[1], ref.direction[0]]))
+            near = (so >= 0) & (so <= ref.length) & (do <= 15.0)
+            a2.plot(so[near], ob[near, 2], ".", ms=0.8, color="#2ca02c", alpha=0.4)
+        if result.ground_z is not None:
+            ss = np.linspace(0.0, ref.length, 200)
+            g = result.ground_z(ref.start[:2] + ss[:, None] * ref.direction)
+            a2.fill_between(ss, g, g.min() - 1.0, color="#c8b68e", lw=0)
+        a2.set_title(f"span {sp['id']}: {len(cds)} conductors, {sp['length']:.0f} m", fontsize=8)
+        a2.set_xlabel("along the span [m]", fontsize=7)
+        a2.set_ylabel("z [m]", fontsize=7)
+        a2.tick_params(labelsize=6)
+    fig.tight_layout()
+    return _save(fig, path, dpi)

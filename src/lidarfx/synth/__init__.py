@@ -19,7 +19,7 @@ line_end        half line ending at the query point
 volume          volumetric scatter
 facade          TLS house facade: ground, wall, roof, window, vegetation, clutter, noise
 rockface        TLS rock face: facets of 3 joint sets, overhang, noise
-powerline       ALS corridor: terrain, pylons, 3 spans × 3 catenary wires, trees
+powerline       ALS corridor: terrain, pylons, 3 spans × 3 catenary wires (bundles, earth wire, cranes optional), trees
 tower           TLS lattice steel tower: legs, braces, arms, bolts
 terrain         ALS ground with a dike and a ditch and their breaklines
 house           ALS gable-roof house on ground with its ridge, eave and verge lines
