@@ -124,7 +124,7 @@ def test_sag_recovered_over_many_corridors():
                 errs.append(abs(cd.measures["sag"] - truth["wires"][w]["sag"]))
                 a_errs.append(abs(cd.a / truth["wires"][w]["a"] - 1.0))
     errs = np.array(errs)
-    # measured 2026-12-02 (162 conductors): median 0.003 m, 95th percentile 0.012 m, 96.3 % within 0.05 m
+    # measured 2026-12-02 (162 conductors): median 0.003 m, 95th percentile 0.011 m, 97.5 % within 0.05 m
     assert np.median(errs) <= 0.005
     assert np.mean(errs <= 0.05) >= 0.95
     assert np.percentile(a_errs, 90) <= 0.005
@@ -291,9 +291,9 @@ def test_real_ahn4_corridor():
     pred = np.asarray(res.cloud["classification"]) == 14
     tp = (pred & (ref == 14)).sum()
     completeness, correctness = tp / (ref == 14).sum(), tp / pred.sum()
-    # measured 2026-12-02: completeness 0.949, correctness 0.964, median RMSE 0.045 m (docs/powerlines.md)
-    assert completeness >= 0.93
+    # measured 2026-12-02: completeness 0.973, correctness 0.957, median RMSE 0.046 m (docs/powerlines.md)
+    assert completeness >= 0.95
     assert correctness >= 0.95
     assert np.median([cd.measures["rmse"] for cd in res.conductors]) <= 0.10
-    assert 1 <= len(res.pylons) <= 2
-    assert (np.asarray(res.cloud["classification"]) == 15)[ref == 15].mean() >= 0.85
+    assert 1 <= len(res.pylons) <= 3
+    assert (np.asarray(res.cloud["classification"]) == 15)[ref == 15].mean() >= 0.8

@@ -350,7 +350,7 @@ def extract_powerlines(
         input had as 14 or 15 and that are not found again become 1 — and the int32
         attributes ``conductor_id``, ``span_id``, ``pylon_id``, −1 elsewhere) and ``meta``.
     """
-    from ..features.api import feature_arrays
+    from ..features.api import feature_arrays, scale_suffix
     from ..ground import classify_ground
     from ..ground.dtm import unit_to_metre
     from ..segment.components import linked_components
@@ -416,14 +416,18 @@ def extract_powerlines(
     vertical = np.zeros(n, bool)  # vertical linear points: insulator strings, poles, never wire
     cand = np.zeros(0, np.int64)
     if len(high) >= min_points:
-        f = feature_arrays(xyz[high], ["linearity", "eigenvector1_z", "n_neighbours"], radius=L["radius"],
-                           progress=progress)
-        lin = np.nan_to_num(f[next(k for k in f if k.startswith("linearity"))], nan=0.0)
-        vz = np.nan_to_num(np.abs(f[next(k for k in f if k.startswith("eigenvector1_z"))]), nan=1.0)
-        nn = f[next(k for k in f if k.startswith("n_neighbours"))]
-        keep = (lin >= p["linearity"]) & (vz <= math.sin(math.radians(p["max_slope"]))) & (nn >= 4)
+        # two scales: the radius, and twice it for sparse wires (earth wires, thin ALS)
+        f = feature_arrays(xyz[high], ["linearity", "eigenvector1_z", "n_neighbours"],
+                           radii=[L["radius"], 2.0 * L["radius"]], progress=progress)
+        keep = np.zeros(len(high), bool)
+        for k, r in enumerate((L["radius"], 2.0 * L["radius"])):
+            sfx = scale_suffix(r)
+            lin = np.nan_to_num(f[f"linearity{sfx}"], nan=0.0)
+            vz = np.nan_to_num(np.abs(f[f"eigenvector1_z{sfx}"]), nan=1.0)
+            keep |= (lin >= p["linearity"]) & (vz <= math.sin(math.radians(p["max_slope"]))) & (f[f"n_neighbours{sfx}"] >= 4)
+            if k == 0:
+                vertical[high[(lin >= p["linearity"]) & (vz > math.cos(math.radians(p["max_slope"])))]] = True
         cand = high[keep]
-        vertical[high[(lin >= p["linearity"]) & (vz > math.cos(math.radians(p["max_slope"])))]] = True
     seconds["candidates"] = time.perf_counter() - t1
 
     # 3. pieces: clusters as plan lines, cut at supports
@@ -910,11 +914,11 @@ def _attachments(pieces: list[_Piece], held: list[list[bool]], L: dict[str, floa
 def _tube_points(pc: _Piece, xyz: np.ndarray, above_idx: np.ndarray, tree, L: dict[str, float],
                  snap: list[np.ndarray | None], piece_of: np.ndarray, me: int) -> np.ndarray:
     """Above-ground points within ``tube`` of the piece's curve: over its own range and
-    beyond it as long as they follow on without a gap (up to ``pylon_radius``; never past
-    a shared attachment point, nor into another piece's points)."""
+    beyond it as long as they follow on without a gap (up to two ``pylon_radius``; never
+    past an attachment point, nor into another piece's points)."""
     if tree is None:
         return np.zeros(0, np.int64)
-    ext = L["pylon_radius"]
+    ext = 2.0 * L["pylon_radius"]
     lo, hi = pc.fit.s_min - ext, pc.fit.s_max + ext
     for k, x in enumerate(snap):
         if x is not None:
@@ -1139,14 +1143,13 @@ def _spans(conductors: list[Conductor], pylons: list[dict[str, Any]], origin: np
     P = np.array([p["position"] for p in pylons]).reshape(-1, 3)
 
     def support(q: np.ndarray, kind: str) -> int:
-        """The pylon holding an end: none at the data edge; within 2 pylon radii of an end
-        held by a support, within one of an end that was open before the growth."""
+        """The pylon holding an end: none at the data edge, else the nearest within two
+        pylon radii (an end open before the growth may have grown up to its pylon)."""
         if not len(P) or kind == "edge":
             return -1
         dist = np.linalg.norm(P[:, :2] - q[:2], axis=1)
         k = int(np.argmin(dist))
-        reach = 2.0 * L["pylon_radius"] if kind == "pylon" else L["pylon_radius"]
-        return int(pylons[k]["id"]) if dist[k] <= reach else -1
+        return int(pylons[k]["id"]) if dist[k] <= 2.0 * L["pylon_radius"] else -1
 
     keys: dict[tuple, list[Conductor]] = {}
     for cd in conductors:
