@@ -102,10 +102,8 @@ def test_corridor_catenaries_recovered(corridor):
         m = (cd.end[2] - cd.start[2]) / cd.length
         assert float(cd.fit.slope(np.array([cd.measures["sag_s"]]))[0]) == pytest.approx(m, abs=1e-6)
     assert np.median(sag_err) <= 0.01
-    # a shared attachment can be placed up to ~2 m off (docs/powerlines.md §5): the slow
-    # test below holds the share over twelve corridors
-    assert np.mean(np.array(sag_err) <= 0.05) >= 7 / 9
-    assert np.median(len_err) <= 0.1 and np.mean(np.array(len_err) <= 1.0) >= 7 / 9
+    assert max(sag_err) <= 0.05
+    assert np.median(len_err) <= 0.1 and max(len_err) <= 0.5
     assert max(a_err) <= 0.01
     assert max(clear_err) <= 0.1
 
@@ -124,9 +122,9 @@ def test_sag_recovered_over_many_corridors():
                 errs.append(abs(cd.measures["sag"] - truth["wires"][w]["sag"]))
                 a_errs.append(abs(cd.a / truth["wires"][w]["a"] - 1.0))
     errs = np.array(errs)
-    # measured 2026-12-02 (162 conductors): median 0.003 m, 95th percentile 0.011 m, 97.5 % within 0.05 m
+    # measured 2026-12-02 (162 conductors): median 0.003 m, 95th percentile 0.009 m, largest 0.015 m
     assert np.median(errs) <= 0.005
-    assert np.mean(errs <= 0.05) >= 0.95
+    assert errs.max() <= 0.05
     assert np.percentile(a_errs, 90) <= 0.005
 
 
@@ -291,7 +289,7 @@ def test_real_ahn4_corridor():
     pred = np.asarray(res.cloud["classification"]) == 14
     tp = (pred & (ref == 14)).sum()
     completeness, correctness = tp / (ref == 14).sum(), tp / pred.sum()
-    # measured 2026-12-02: completeness 0.973, correctness 0.957, median RMSE 0.046 m (docs/powerlines.md)
+    # measured 2026-12-02: completeness 0.972, correctness 0.960, median RMSE 0.046 m (docs/powerlines.md)
     assert completeness >= 0.95
     assert correctness >= 0.95
     assert np.median([cd.measures["rmse"] for cd in res.conductors]) <= 0.10

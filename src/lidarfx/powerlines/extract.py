@@ -290,8 +290,9 @@ def _cut(cxyz: np.ndarray, idx: np.ndarray, peak_ends: tuple[bool, bool], kink_a
     s = (cxyz[idx, :2] - c) @ d
     lat = (cxyz[idx, :2] - c) @ np.array([-d[1], d[0]])
     dev = np.abs(lat - np.median(lat))
-    on_line = dev <= max(3.0 * 1.4826 * float(np.median(dev)), 0.3)  # stray points make no kinks
-    cuts = _kinks(s[on_line], cxyz[idx[on_line], 2], **kink_args)
+    on_line = dev <= max(3.0 * 1.4826 * float(np.median(dev)), kink_args["plan_tolerance"])  # strays make no kinks
+    cuts = _kinks(s[on_line], cxyz[idx[on_line], 2],
+                  **{k: v for k, v in kink_args.items() if k != "plan_tolerance"})
     if not cuts:
         pc = _piece(cxyz, idx, peak_ends)
         return [pc] if pc is not None else []
@@ -435,7 +436,8 @@ def extract_powerlines(
     pieces: list[_Piece] = []
     peak_xyz: list[np.ndarray] = []
     cxyz = xyz[cand] if len(cand) else np.zeros((0, 3))
-    kink_args = {"bin_size": 2.0 / unit, "window": 15.0 / unit, "kink": float(p["kink"])}
+    kink_args = {"bin_size": 2.0 / unit, "window": 15.0 / unit, "kink": float(p["kink"]),
+                 "plan_tolerance": L["plan_tolerance"]}
     if len(cand) >= min_points:
         comp = linked_components(cxyz, L["link"])
         order = np.argsort(comp, kind="stable")
@@ -760,13 +762,13 @@ def _at_edge(q: np.ndarray, out: np.ndarray, occupied, step: float, reach: float
 
 def _structure_at(q: np.ndarray, xyz: np.ndarray, idx: np.ndarray, tree, hag: np.ndarray, L: dict[str, float]) -> bool:
     """A structure holds the wire end ``q``: above-ground non-wire points within
-    ``pylon_radius`` reach up to the wire height (within 3 m) and down to half of it."""
+    ``pylon_radius`` reach up to the wire height (within ``tube``) and down to half of it."""
     near = idx[tree.query_ball_point(q[:2], L["pylon_radius"])]
     if len(near) < 5:
         return False
     z = xyz[near, 2]
     q_hag = float(q[2] - (xyz[near, 2] - hag[near]).mean())
-    return bool(z.max() >= q[2] - 3.0 and hag[near].min() <= 0.5 * q_hag)
+    return bool(z.max() >= q[2] - L["tube"] and hag[near].min() <= 0.5 * q_hag)
 
 
 def _clutter(pc: _Piece, xyz: np.ndarray, tree, L: dict[str, float]) -> float:
@@ -1063,7 +1065,7 @@ def _conductor(cid: int, bundle: int, b_index: int, size: int, xyz: np.ndarray, 
 def _pylons(pos: list[np.ndarray], xyz: np.ndarray, pool: np.ndarray, L: dict[str, float],
             origin: np.ndarray) -> tuple[list[dict[str, Any]], np.ndarray]:
     """Pylons from the held wire ends: the clusters of above-ground points (``pool``)
-    within ``pylon_radius`` of an end that reach up to it (within 3 m); ends that
+    within ``pylon_radius`` of an end that reach up to it (within ``tube``); ends that
     share such a cluster, or lie within ``pylon_radius`` of each other without one,
     are one pylon."""
     from scipy.spatial import cKDTree
@@ -1093,7 +1095,7 @@ def _pylons(pos: list[np.ndarray], xyz: np.ndarray, pool: np.ndarray, L: dict[st
         if len(near):
             for k in np.unique(comp[near]):
                 m = near[comp[near] == k]
-                if len(m) >= 5 and xyz[pool_idx[m], 2].max() >= q[2] - 3.0:
+                if len(m) >= 5 and xyz[pool_idx[m], 2].max() >= q[2] - L["tube"]:
                     ks.add(int(k))
         held.append(ks)
     for i in range(len(P)):
