@@ -5,35 +5,37 @@ Steps (docs/powerlines.md §1 in full):
 1. **ground and height** — ground points from class 2 (or the ground filter when
    the cloud has none), height above a 1 m grid of their mean heights;
 2. **candidates** — points at least ``min_height`` above ground whose
-   neighbourhood within ``radius`` is linear (``linearity ≥ linearity``) along a
-   near-horizontal first eigenvector (``|v1_z| ≤ sin(max_slope)``); the features
-   are computed on the above-ground points only;
+   neighbourhood within ``radius`` or twice it (sparse wires) is linear
+   (``linearity ≥ linearity``) along a near-horizontal first eigenvector
+   (``|v1_z| ≤ sin(max_slope)``); vertical linear points (insulator strings) are
+   kept apart; the features are computed on the above-ground points only;
 3. **pieces** — single-linkage clusters of the candidates (``link``), split into
    straight lines in plan view when they stray from one (``plan_tolerance``); each is
    cut where the slope of its profile drops by more than ``kink`` (a catenary is
    convex, its slope only grows: a drop is a support, i.e. a pylon) and gets a
    robust catenary in its own plan frame;
-4. **conductor spans** — pieces that continue each other (facing ends within
-   ``max_gap``, the first one's curve passes the second one's end within
-   ``join_tolerance``, no pylon between them) are joined and refitted: gaps in the
-   returns do not cut a wire;
-5. **supports** — every end of a conductor span must be held: by a pylon (a
-   peak of step 3, or a structure of above-ground points reaching up to the wire
-   within ``pylon_radius``) or by the edge of the data; conductor runs (spans
-   joined at pylons) shorter than ``min_length``, and runs with an unheld end
-   shorter than ``long_length``, are not wires (crane jibs, roof ridges, fences);
-6. **growth and bundles** — every above-ground point within the wire's tube
-   (``tube`` around its curve) joins it; the residuals across and along the
-   vertical then tell bundled sub-conductors apart (a Gaussian mixture of 1 to 4
-   components chosen by BIC, accepted only when the components are separated by
-   more than ``bundle_separation`` and four of their spreads); each sub-conductor
-   gets its own catenary;
-7. **pylons and spans** — pylon positions are clustered (``pylon_radius``), their
-   points are the above-ground clusters reaching up to the wires there; conductors
-   between the same two supports form a span;
+4. **joins** — pieces that continue each other (facing, at most ``max_gap`` apart,
+   their points fit one catenary, no support between them) are joined and refitted,
+   then cut again at the kinks they now show: gaps in the returns do not cut a wire;
+5. **held and free** — every end must be held: by a support of step 3, the edge of
+   the data, or a structure of above-ground points reaching up to the wire within
+   ``pylon_radius``; a wire hangs free (:func:`_clutter`); runs (pieces joined at
+   pylons) shorter than ``min_length``, and runs with an unheld end shorter than
+   ``long_length``, are not wires (crane jibs, roof ridges, fences);
+6. **attachments and growth** — an end's attachment point is the lower end of an
+   insulator string, else where two spans' curves meet, else the first structure on
+   the extended curve; every above-ground point within the wire's tube (``tube``)
+   joins it, beyond the piece only as long as the points follow on; the residuals
+   across and along the vertical tell bundled sub-conductors apart (a Gaussian
+   mixture of 1 to 4 components chosen by BIC, accepted only when the components are
+   separated by more than ``bundle_separation`` and four of their spreads); each
+   sub-conductor gets its own catenary;
+7. **pylons and spans** — held ends that share a structure are one pylon, its points
+   the above-ground clusters reaching up to them; conductors between the same two
+   supports form a span;
 8. **measures** — per conductor: attachment points, ``a``, ``s0``, ``c``, RMSE,
-   sag, conductor length, lowest point, clearance to ground (TIN) and to objects
-   (the remaining above-ground points, or classes 3–5 when the cloud has them).
+   sag, conductor length, lowest point, clearance to ground and to objects (the
+   remaining above-ground points, or classes 3–5 when the cloud has them).
 """
 from __future__ import annotations
 
@@ -613,6 +615,7 @@ def extract_powerlines(
         "pylons": len(pylons),
         "seconds": {k: round(v, 3) for k, v in seconds.items()},
     }
+
     def ground_world(q: np.ndarray) -> np.ndarray:
         return ground_z(np.asarray(q, np.float64)[:, :2] - origin[:2]) + origin[2]
 
