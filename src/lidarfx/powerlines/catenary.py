@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import LidarfxError
 
-__all__ = ["CatenaryFit", "fit_catenary", "tangent_z", "catenary_z"]
+__all__ = ["CatenaryFit", "catenary_through", "catenary_z", "fit_catenary", "tangent_z"]
 
 TUKEY_C = 4.685
 MAD_TO_SIGMA = 1.4826
@@ -49,6 +49,18 @@ def tangent_z(s: np.ndarray, h: float, m: float, u: float, s_ref: float) -> np.n
 def catenary_z(s: np.ndarray, a: float, s0: float, c: float) -> np.ndarray:
     """``z(s) = c + a · cosh((s − s0) / a)``."""
     return c + a * np.cosh((np.asarray(s, dtype=np.float64) - s0) / a)
+
+
+def catenary_through(z_start: float, z_end: float, length: float, a: float) -> tuple[float, float]:
+    """``(s0, c)`` of the catenary with parameter ``a`` through (0, z_start) and (length, z_end).
+
+    Closed form: ``z_end − z_start = 2a sinh((L − 2 s0)/(2a)) sinh(L/(2a))``.
+    """
+    if length <= 0 or a <= 0:
+        raise LidarfxError("catenary needs length > 0 and a > 0")
+    s0 = length / 2.0 - a * math.asinh((z_end - z_start) / (2.0 * a * math.sinh(length / (2.0 * a))))
+    c = z_start - a * math.cosh(s0 / a)
+    return s0, c
 
 
 @dataclass

@@ -806,26 +806,26 @@ def _clutter(pc: _Piece, xyz: np.ndarray, tree, L: dict[str, float]) -> float:
     return float(np.mean(ring[used] > inner[used]))
 
 
+def _groups(n: int, links: list[tuple[int, int]]) -> np.ndarray:
+    """Connected-component label of each of ``n`` items linked by ``links`` (pairs)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    ij = np.array(links, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(ij)), (ij[:, 0], ij[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
 def _runs_kept(pieces: list[_Piece], ends: list, L: dict[str, float], free: np.ndarray) -> np.ndarray:
     """Keep the pieces of runs (pieces joined at shared pylons) that are long enough, held at
     both ends and hang free (:func:`_clutter`)."""
     k = len(pieces)
-    parent = list(range(k))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for i in range(k):
-        for j in range(i + 1, k):
-            for ki, qi in ends[i]:
-                for kj, qj in ends[j]:
-                    if ki == "pylon" and kj == "pylon" and np.linalg.norm(qi - qj) <= L["pylon_radius"] \
-                            and abs(float(pieces[i].direction @ pieces[j].direction)) > math.cos(math.radians(45.0)):
-                        parent[find(i)] = find(j)
-    roots = [find(i) for i in range(k)]
+    cos45 = math.cos(math.radians(45.0))
+    links = [(i, j) for i in range(k) for j in range(i + 1, k)
+             if abs(float(pieces[i].direction @ pieces[j].direction)) > cos45
+             and any(ki == "pylon" and kj == "pylon" and np.linalg.norm(qi - qj) <= L["pylon_radius"]
+                     for ki, qi in ends[i] for kj, qj in ends[j])]
+    roots = _groups(k, links)
     keep = np.zeros(k, bool)
     for r in set(roots):
         members = [i for i in range(k) if roots[i] == r]
@@ -1083,14 +1083,6 @@ def _pylons(pos: list[np.ndarray], xyz: np.ndarray, pool: np.ndarray, L: dict[st
     pool_idx = np.flatnonzero(pool)
     comp = linked_components(xyz[pool_idx], 1.5 * L["radius"]) if len(pool_idx) else np.zeros(0, np.int64)
     tree = cKDTree(xyz[pool_idx, :2]) if len(pool_idx) else None
-    parent = list(range(len(P)))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
     held: list[set] = []
     for q in P:
         near = np.asarray(tree.query_ball_point(q[:2], L["pylon_radius"]), np.int64) if tree is not None else []
@@ -1101,14 +1093,12 @@ def _pylons(pos: list[np.ndarray], xyz: np.ndarray, pool: np.ndarray, L: dict[st
                 if len(m) >= 5 and xyz[pool_idx[m], 2].max() >= q[2] - L["tube"]:
                     ks.add(int(k))
         held.append(ks)
-    for i in range(len(P)):
-        for j in range(i + 1, len(P)):
-            if held[i] & held[j] or (np.linalg.norm(P[i, :2] - P[j, :2]) <= L["pylon_radius"]
-                                     and not (held[i] or held[j])):
-                parent[find(i)] = find(j)
+    links = [(i, j) for i in range(len(P)) for j in range(i + 1, len(P))
+             if held[i] & held[j] or (np.linalg.norm(P[i, :2] - P[j, :2]) <= L["pylon_radius"]
+                                      and not (held[i] or held[j]))]
     groups: dict[int, list[int]] = {}
-    for i in range(len(P)):
-        groups.setdefault(find(i), []).append(i)
+    for i, r in enumerate(_groups(len(P), links)):
+        groups.setdefault(int(r), []).append(i)
     # an end with no structure of its own, alone, belongs to the nearest pylon (an earth
     # wire whose last metres at the peak were not seen)
     alone = [r for r, g in groups.items() if len(g) == 1 and not held[g[0]]]

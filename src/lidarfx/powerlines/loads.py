@@ -25,10 +25,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq
 
 from ..errors import LidarfxError, LidarfxWarning
-from ..synth.powerline import catenary_through
+from .catenary import catenary_through
 
 __all__ = [
     "AIR_DENSITY", "CONDUCTORS", "Conductor", "G", "LoadCase", "SpanState", "catenary_sag",
@@ -309,6 +308,8 @@ def state_change(H1: float, L: float, h: float, *, w1: float, theta1: float, w2:
         hi *= 2.0
         if hi > 1e6 * H1:
             raise LidarfxError("change of state has no solution (conductor too short for the span)")
+    from scipy.optimize import brentq
+
     return float(brentq(f, lo, hi, xtol=1e-12 * H1, rtol=4 * np.finfo(float).eps, maxiter=200))
 
 
@@ -324,6 +325,8 @@ def state_change_parabolic(sigma1: float, g1: float, theta1: float, g2: float, t
     B = -sigma1 + E * g1 * g1 * L * L / (24.0 * sigma1 * sigma1) + E * alpha * (theta2 - theta1)
     D = E * g2 * g2 * L * L / 24.0
     hi = max(0.0, -B) + D ** (1.0 / 3.0) + 1.0  # p(hi) > 0, p(0) = −D < 0: one positive root
+    from scipy.optimize import brentq
+
     return float(brentq(lambda s: s * s * (s + B) - D, 0.0, hi, xtol=1e-14 * hi, maxiter=200))
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import LidarfxError
+from ..powerlines.catenary import catenary_through, catenary_z
 from ._common import (
     Scene,
     add_noise,
@@ -101,23 +102,6 @@ def bundle_offsets(bundle: int, spacing: float) -> np.ndarray:
     if bundle == 4:
         return np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
     raise LidarfxError(f"bundle must be 1, 2, 3 or 4, got {bundle!r}")
-
-
-def catenary_z(s: Any, a: float, s0: float, c: float) -> np.ndarray:
-    """``z(s) = c + a · cosh((s − s0) / a)``."""
-    return c + a * np.cosh((np.asarray(s, float) - s0) / a)
-
-
-def catenary_through(z_start: float, z_end: float, length: float, a: float) -> tuple[float, float]:
-    """``(s0, c)`` of the catenary with parameter ``a`` through (0, z_start) and (length, z_end).
-
-    Closed form: ``z_end − z_start = 2a sinh((L − 2 s0)/(2a)) sinh(L/(2a))``.
-    """
-    if length <= 0 or a <= 0:
-        raise LidarfxError("catenary needs length > 0 and a > 0")
-    s0 = length / 2.0 - a * math.asinh((z_end - z_start) / (2.0 * a * math.sinh(length / (2.0 * a))))
-    c = z_start - a * math.cosh(s0 / a)
-    return s0, c
 
 
 def _wire_truth(wid: int, span: int, phase: int, A: np.ndarray, B: np.ndarray, a: float,
