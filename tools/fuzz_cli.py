@@ -137,6 +137,8 @@ COMMANDS = {
     ("eigenclass",): ["{IN}", "out/o.laz", "-r", "1", "-q"],
     ("edges",): ["{IN}", "out/o.geojson", "-r", "1", "--csv", "--dxf", "out/o.dxf", "-q"],
     ("powerlines",): ["{IN}", "out/pl", "--load-case", "temp=80", "-q"],
+    ("discontinuities",): ["{IN}", "out/dc", "-q"],
+    ("colour",): ["{IN}", "out/o.laz", "--picture", "out/o.png", "-q"],
 }
 
 

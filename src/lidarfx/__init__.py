@@ -21,6 +21,8 @@ __all__ = [
     "classify_structures",
     "extract_edges",
     "extract_powerlines",
+    "analyse_discontinuities",
+    "colour_cloud",
     "__version__",
 ]
 
@@ -51,7 +53,16 @@ def __getattr__(name: str):
         from .powerlines import extract_powerlines
 
         return extract_powerlines
-    if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector", "powerlines"):
+    if name == "analyse_discontinuities":
+        from .discontinuities import analyse_discontinuities
+
+        return analyse_discontinuities
+    if name == "colour_cloud":
+        from .colour import colour_cloud
+
+        return colour_cloud
+    if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector", "powerlines",
+                "discontinuities", "colour"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

@@ -28,7 +28,7 @@ import numpy as np
 
 from .errors import LidarfxError
 
-__all__ = ["NeighborIndex", "Grid", "default_cell_for_knn"]
+__all__ = ["NeighborIndex", "Grid", "default_cell_for_knn", "default_radius"]
 
 
 class Grid(NamedTuple):
@@ -575,3 +575,29 @@ class NeighborIndex:
         _knn_kernel(*g, ql, int(k), rmax, idx, dist)
         out = np.where(idx >= 0, self.order[np.maximum(idx, 0)], -1)
         return out, dist
+
+
+def default_radius(cloud, *, neighbours: int = 40, sample: int = 10_000, seed: int = 0) -> float:
+    """A sphere radius holding about ``neighbours`` points on a planar part of the cloud:
+    √2 × the median distance to the 20th nearest neighbour (over a seeded sample of at
+    most ``sample`` points; for points on a plane the 20th neighbour lies at
+    √(20 / (π ρ)), so the radius holds about 40), with two significant digits."""
+    from .errors import check_int
+
+    neighbours = check_int("neighbours", neighbours, 1, 100_000)
+    sample = check_int("sample", sample, 1, 10**9)
+    xyz = np.asarray(getattr(cloud, "xyz", cloud), dtype=np.float64)
+    if len(xyz) < 2:
+        raise LidarfxError("the point cloud has fewer than 2 points; give a radius")
+    k = min(21, len(xyz))  # the point itself and 20 neighbours
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(xyz), size=min(sample, len(xyz)), replace=False)
+    local = xyz - xyz.min(axis=0)
+    index = NeighborIndex(xyz, default_cell_for_knn(local, k))
+    _, d = index.knn(xyz[pick], k)
+    dk = d[:, -1]
+    dk = dk[np.isfinite(dk) & (dk > 0)]
+    if not len(dk):
+        raise LidarfxError("cannot estimate a radius: the points coincide; give a radius")
+    r = math.sqrt(neighbours / 20.0) * float(np.median(dk))
+    return float(f"{r:.2g}")

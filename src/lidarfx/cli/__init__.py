@@ -13,7 +13,7 @@ import warnings
 from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
 COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
-                   "eigenclass", "edges", "powerlines"]
+                   "eigenclass", "edges", "powerlines", "discontinuities", "colour"]
 
 EPILOG = """examples:
   lidarfx demo                                   # run the main job on the bundled sample
@@ -23,6 +23,8 @@ EPILOG = """examples:
   lidarfx eigenclass roofs.laz struct.laz -r 1.5 # plane / border / edge / corner / line / volume
   lidarfx edges roofs.laz lines.geojson --dxf lines.dxf --csv
   lidarfx powerlines corridor.laz out/ --load-case temp=80   # wires, catenaries, sag, clearances
+  lidarfx discontinuities face.laz out/ --scanner 5,-25,1.5  # joint sets, stereonet, spacing, overhangs
+  lidarfx colour face.laz rgb.laz --picture face.png        # RGB: aspect hue, slope saturation, shading
 """
 
 

@@ -28,7 +28,7 @@ def xyz(text: str) -> list[float]:
     return vals
 
 
-NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation")
+NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation", "--reference-plane", "--range")
 """Options whose value is a comma-separated list of numbers, which may start with a minus sign."""
 _NUMBER_LIST = re.compile(r"^-[0-9.][0-9.eE+\-]*(,[0-9.eE+\- ]*)+$")
 
@@ -108,6 +108,21 @@ def read_input(args):
     check_output(args.input, args.output)
     progress = False if args.quiet else None
     return io.read(args.input, columns=columns_of(args), progress=progress), progress
+
+
+def check_output_dir(path: str):
+    """An output folder, before any work: not an existing file, its parent exists (it is
+    created at the end, when there is something to write)."""
+    from pathlib import Path
+
+    from ..errors import LidarfxError
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise LidarfxError(f"{out} exists and is not a folder")
+    if not out.parent.is_dir() and str(out.parent) not in ("", "."):
+        raise LidarfxError(f"output folder's parent does not exist: {out.parent}")
+    return out
 
 
 def check_picture_path(path: str) -> None:

@@ -5,7 +5,7 @@ import argparse
 import time
 from pathlib import Path
 
-from ._args import add_columns, columns_of, emit_summary
+from ._args import add_columns, check_output_dir, columns_of, emit_summary
 
 EPILOG = """examples:
   lidarfx powerlines corridor.laz out/                        # ground = class 2 (else the ground filter)
@@ -99,11 +99,7 @@ def run(args) -> int:
         raise LidarfxError(f"--step must be a positive length, got {args.step!r}")
     cases = [parse_load_case(c) for c in args.load_case]  # refuse bad specs before any work
     cond = conductor(args.conductor) if cases else None
-    out = Path(args.outdir)
-    if out.exists() and not out.is_dir():
-        raise LidarfxError(f"{out} exists and is not a folder")
-    if not out.parent.is_dir() and str(out.parent) not in ("", "."):
-        raise LidarfxError(f"output folder's parent does not exist: {out.parent}")
+    out = check_output_dir(args.outdir)
     cloud_path = out / f"cloud.{args.cloud_format}" if args.cloud_format != "none" else None
     if cloud_path is not None:
         check_not_same_file(args.input, cloud_path)

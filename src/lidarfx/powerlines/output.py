@@ -20,7 +20,6 @@ Files in the output folder (docs/powerlines.md §3):
 """
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 from typing import Any, Sequence
@@ -94,16 +93,9 @@ def conductor_polylines(res: PowerLines, step: float = 0.5) -> list[Polyline]:
 
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    cols: list[str] = []
-    for r in rows:
-        for k in r:
-            if k not in cols:
-                cols.append(k)
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in cols})
+    from .._tables import write_csv_rows
+
+    write_csv_rows(path, rows)
 
 
 def write_tables(res: PowerLines, folder: str | Path, *, crs: Any = None, step: float = 0.5,

@@ -217,6 +217,7 @@ def segment_planes(
     refit_fraction: float = 0.10,
     refit_max: int = 1000,
     keep_features: bool = False,
+    features: dict[str, np.ndarray] | None = None,
     inplace: bool = False,
     progress: bool | None = None,
 ) -> PointCloud:
@@ -257,6 +258,10 @@ def segment_planes(
     keep_features:
         Also store ``normal_x/y/z`` and ``plane_std`` (float32) of the normal
         radius on the result.
+    features:
+        Precomputed ``normal_x/y/z`` and ``plane_std`` of every point at
+        ``normal_radius`` (from :func:`lidarfx.features.feature_arrays`), so
+        that a caller needing them anyway computes them once.
     inplace:
         Add the attributes to ``cloud`` itself instead of a new cloud.
     progress:
@@ -284,14 +289,13 @@ def segment_planes(
 
     # one index for the normals and the growing (cell = the larger radius)
     index = NeighborIndex(cloud.xyz, max(normal_radius, growing_radius))
-    feats = feature_arrays(
-        cloud.xyz,
-        ["normal_x", "normal_y", "normal_z", "plane_std"],
-        radius=normal_radius,
-        scanner=scanner,
-        progress=progress,
-        index=index,
-    )
+    need = ["normal_x", "normal_y", "normal_z", "plane_std"]
+    if features is not None:
+        if any(k not in features or np.shape(features[k]) != (n,) for k in need):
+            raise LidarfxError("precomputed features need normal_x, normal_y, normal_z and plane_std, one value per point")
+        feats = {k: features[k] for k in need}
+    else:
+        feats = feature_arrays(cloud.xyz, need, radius=normal_radius, scanner=scanner, progress=progress, index=index)
     order = index.order
     nrm_orig = np.column_stack([feats["normal_x"], feats["normal_y"], feats["normal_z"]]).astype(np.float64)
     std = feats["plane_std"]

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..cloud import PointCloud
 from ..errors import LidarfxError, check_int
+from ..neighbors import default_radius
 from ..synth.structures import STRUCTURE_IDS
 from .references import (
     SIGNATURE,
@@ -237,32 +238,6 @@ def classify_signatures(sig: np.ndarray, cnt: np.ndarray, *, references: Any = "
 
 
 # ------------------------------------------------------------------ public API
-def default_radius(cloud: PointCloud | np.ndarray, *, neighbours: int = 40, sample: int = 10_000, seed: int = 0) -> float:
-    """A sphere radius holding about ``neighbours`` points on a planar part of the cloud:
-    √2 × the median distance to the 20th nearest neighbour (over a seeded sample of at
-    most ``sample`` points; for points on a plane the 20th neighbour lies at
-    √(20 / (π ρ)), so the radius holds about 40), with two significant digits."""
-    from ..neighbors import NeighborIndex, default_cell_for_knn
-
-    neighbours = check_int("neighbours", neighbours, 1, 100_000)
-    sample = check_int("sample", sample, 1, 10**9)
-    xyz = cloud.xyz if isinstance(cloud, PointCloud) else np.asarray(cloud, dtype=np.float64)
-    if len(xyz) < 2:
-        raise LidarfxError("the point cloud has fewer than 2 points; give a radius")
-    k = min(21, len(xyz))  # the point itself and 20 neighbours
-    rng = np.random.default_rng(seed)
-    pick = rng.choice(len(xyz), size=min(sample, len(xyz)), replace=False)
-    local = xyz - xyz.min(axis=0)
-    index = NeighborIndex(xyz, default_cell_for_knn(local, k))
-    _, d = index.knn(xyz[pick], k)
-    dk = d[:, -1]
-    dk = dk[np.isfinite(dk) & (dk > 0)]
-    if not len(dk):
-        raise LidarfxError("cannot estimate a radius: the points coincide; give a radius")
-    r = math.sqrt(neighbours / 20.0) * float(np.median(dk))
-    return float(f"{r:.2g}")
-
-
 def classify_structures(
     cloud: PointCloud,
     radius: float | None = None,
