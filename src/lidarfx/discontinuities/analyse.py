@@ -434,7 +434,7 @@ def analyse_discontinuities(
             "angle_to_set": float(angle_to_set[k]), "rms": float(math.sqrt(lam_seg[k, 2])),
             "planarity": float(med_plan[k]), "area": float(area[k]), "trace_length": float(trace[k]),
             "strike_length": float(strike_len[k]), "dip_length": float(dip_len[k]),
-            "reference_distance": float(seg_ref[k]), "overhang": bool(seg_over[k]),
+            "reference_distance": float(seg_ref[k]), "overhang": int(seg_over[k]),
         })
     n_assigned = int((set_id >= 0).sum())
     sets = []
