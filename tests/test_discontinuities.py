@@ -270,18 +270,7 @@ def test_a_cloud_without_planes_gives_no_sets():
 
 
 # ----------------------------------------------------------------------------- CLI
-def _run(argv, capsys):
-    from lidarfx.cli import main
-
-    try:
-        rc = main(argv)
-    except SystemExit as exc:
-        rc = exc.code
-    out = capsys.readouterr()
-    return rc, out.out, out.err
-
-
-def test_cli_outputs(tmp_path, capsys):
+def test_cli_outputs(tmp_path, run_cli):
     cloud = lidarfx.synth.rockface(density=120, seed=2)
     src = tmp_path / "face.laz"
     lidarfx.write(cloud, src)
@@ -289,7 +278,7 @@ def test_cli_outputs(tmp_path, capsys):
     args = ["discontinuities", str(src), str(tmp_path / "out"), "--json"]
     for s in sc:
         args += ["--scanner", ",".join(f"{v:g}" for v in s)]
-    rc, out, err = _run(args, capsys)
+    rc, out, err = run_cli(args)
     assert rc == 0, err
     summary = json.loads(out)
     assert len(summary["sets"]) == 3 and summary["reference_plane"]["kind"] == "horizontal"
@@ -308,7 +297,7 @@ def test_cli_outputs(tmp_path, capsys):
     assert (back["set_id"] >= 0).mean() > 0.9
 
 
-def test_cli_errors(tmp_path, capsys):
+def test_cli_errors(tmp_path, run_cli):
     src = tmp_path / "face.laz"
     lidarfx.write(lidarfx.synth.rockface(density=20, seed=0), src)
     afile = tmp_path / "file.txt"
@@ -321,7 +310,7 @@ def test_cli_errors(tmp_path, capsys):
         ([str(src), str(tmp_path / "o"), "--scanner", "1,2"], "x,y,z"),
         ([str(src), str(tmp_path / "o"), "--max-angle", "0"], "max_angle"),
     ):
-        rc, out, err = _run(["discontinuities", *args], capsys)
+        rc, out, err = run_cli(["discontinuities", *args])
         assert rc == 2, (args, err)
         assert msg in err and "Traceback" not in err
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())

@@ -139,6 +139,7 @@ COMMANDS = {
     ("powerlines",): ["{IN}", "out/pl", "--load-case", "temp=80", "-q"],
     ("discontinuities",): ["{IN}", "out/dc", "-q"],
     ("colour",): ["{IN}", "out/o.laz", "--picture", "out/o.png", "-q"],
+    ("breaklines",): ["{IN}", "out/o.geojson", "--csv", "--dxf", "out/o.dxf", "--picture", "out/o.png", "-q"],
 }
 
 

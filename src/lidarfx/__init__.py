@@ -23,6 +23,7 @@ __all__ = [
     "extract_powerlines",
     "analyse_discontinuities",
     "colour_cloud",
+    "extract_breaklines",
     "__version__",
 ]
 
@@ -57,12 +58,16 @@ def __getattr__(name: str):
         from .discontinuities import analyse_discontinuities
 
         return analyse_discontinuities
+    if name == "extract_breaklines":
+        from .breaklines import extract_breaklines
+
+        return extract_breaklines
     if name == "colour_cloud":
         from .colour import colour_cloud
 
         return colour_cloud
     if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector", "powerlines",
-                "discontinuities", "colour"):
+                "discontinuities", "colour", "breaklines"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

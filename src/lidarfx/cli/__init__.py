@@ -13,7 +13,7 @@ import warnings
 from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
 COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
-                   "eigenclass", "edges", "powerlines", "discontinuities", "colour"]
+                   "eigenclass", "edges", "powerlines", "discontinuities", "colour", "breaklines"]
 
 EPILOG = """examples:
   lidarfx demo                                   # run the main job on the bundled sample
@@ -24,6 +24,7 @@ EPILOG = """examples:
   lidarfx edges roofs.laz lines.geojson --dxf lines.dxf --csv
   lidarfx powerlines corridor.laz out/ --load-case temp=80   # wires, catenaries, sag, clearances
   lidarfx discontinuities face.laz out/ --scanner 5,-25,1.5  # joint sets, stereonet, spacing, overhangs
+  lidarfx breaklines als.laz lines.geojson --dxf lines.dxf   # dike crests and toes, ditch edges (3-D)
   lidarfx colour face.laz rgb.laz --picture face.png        # RGB: aspect hue, slope saturation, shading
 """
 

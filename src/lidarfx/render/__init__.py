@@ -400,6 +400,24 @@ LINE_COLOURS = {"edge": "#d62728", "border": "#1f77b4", "reference": "#2ca02c"}
 """Colours of polyline kinds in :func:`lines_view` (other kinds: the tab10 cycle)."""
 
 
+def _finish_line_map(fig, ax, handles, reference: bool, reference_label: str, span_x: float, span_y: float,
+                     x0: float, y0: float, title: str | None, path, dpi: int) -> Path:
+    """Legend (with the reference entry), extent, labels and title of a plan view of lines; saves it."""
+    import matplotlib.pyplot as plt
+
+    if reference:
+        handles = [*handles, plt.Line2D([], [], color=LINE_COLOURS["reference"], lw=5, alpha=0.45, label=reference_label)]
+    if handles:
+        ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.85)
+    ax.set_xlim(0, span_x)
+    ax.set_ylim(0, span_y)
+    ax.set_aspect("equal")
+    _label_axes(ax, f"x (East) {_offset_text(x0)} [m]", f"y (North) {_offset_text(y0)} [m]")
+    if title:
+        ax.set_title(title, fontsize=9)
+    return _save(fig, path, dpi)
+
+
 def lines_view(
     cloud: PointCloud,
     lines: Sequence,
@@ -457,17 +475,7 @@ def lines_view(
         kinds.setdefault(pl.kind, []).append(pl.length)
     handles = [plt.Line2D([], [], color=LINE_COLOURS.get(k, tab(i % 10)), lw=2, label=f"{k}: {len(v)} lines, {sum(v):,.0f} m")
                for i, (k, v) in enumerate(sorted(kinds.items()))]
-    if reference:
-        handles.append(plt.Line2D([], [], color=LINE_COLOURS["reference"], lw=5, alpha=0.45, label=reference_label))
-    if handles:
-        ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.85)
-    ax.set_xlim(0, span_x)
-    ax.set_ylim(0, span_y)
-    ax.set_aspect("equal")
-    _label_axes(ax, f"x (East) {_offset_text(x0)} [m]", f"y (North) {_offset_text(y0)} [m]")
-    if title:
-        ax.set_title(title, fontsize=9)
-    return _save(fig, path, dpi)
+    return _finish_line_map(fig, ax, handles, bool(reference), reference_label, span_x, span_y, x0, y0, title, path, dpi)
 
 
 def powerline_view(result, path: str | Path, *, title: str | None = None, max_profiles: int = 12,
@@ -540,3 +548,53 @@ def powerline_view(result, path: str | Path, *, title: str | None = None, max_pr
         a2.tick_params(labelsize=6)
     fig.tight_layout()
     return _save(fig, path, dpi)
+
+
+def hillshade(z: np.ndarray, cell: float, *, azimuth: float = 315.0, altitude: float = 45.0) -> np.ndarray:
+    """Lambert shading (0–1) of a north-up height grid (row 0 = north) under a sun at
+    ``azimuth`` (clockwise from North) and ``altitude`` degrees; NaN cells stay NaN."""
+    z = np.asarray(z, dtype=np.float64)
+    rows, cols = z.shape
+    if min(rows, cols) < 2:  # one row or column: repeat it, so that it shades as flat across
+        z = np.pad(z, [(0, max(0, 2 - rows)), (0, max(0, 2 - cols))], mode="edge")
+    gy, gx = np.gradient(z, cell)
+    gy = -gy  # rows run south
+    n = np.dstack([-gx, -gy, np.ones_like(gx)])
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    az, alt = math.radians(azimuth), math.radians(altitude)
+    sun = np.array([math.cos(alt) * math.sin(az), math.cos(alt) * math.cos(az), math.sin(alt)])
+    return np.clip(n @ sun, 0.0, 1.0)[:rows, :cols]
+
+
+def breakline_view(dtm, lines: Sequence, path: str | Path, *, reference: Sequence[np.ndarray] | None = None,
+                   title: str | None = None, dpi: int = 110) -> Path:
+    """Hillshade of a DTM (:class:`lidarfx.ground.raster.Raster`) with 3-D polylines drawn in plan
+    view (convex breaks red, concave blue; ``attrs["form"]``) and optional reference lines
+    (wide translucent green).  Axes in metres from the raster's south-west corner."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    z = np.asarray(dtm.array, dtype=np.float64)
+    rows, cols = z.shape
+    cell = float(dtm.resolution)
+    x0, ytop = (float(v) for v in dtm.origin)
+    y0 = ytop - rows * cell
+    span_x, span_y = cols * cell, rows * cell
+    fig_w = 8.0
+    fig, ax = plt.subplots(figsize=(fig_w, max(3.0, min(fig_w * span_y / span_x, 1.4 * fig_w)) + 0.4))
+    ax.imshow(hillshade(z, cell), cmap="Greys_r", vmin=0, vmax=1, extent=(0, span_x, 0, span_y), interpolation="bilinear")
+    for ref in reference or []:
+        r = np.asarray(ref, dtype=np.float64)
+        ax.plot(r[:, 0] - x0, r[:, 1] - y0, "-", lw=5, alpha=0.45, color=LINE_COLOURS["reference"], solid_capstyle="round")
+    colours = {"convex": "#d62728", "concave": "#1f77b4"}
+    seen: dict[str, list[float]] = {}
+    for pl in lines:
+        form = str(pl.attrs.get("form", "line"))
+        v = pl.vertices
+        ax.plot(v[:, 0] - x0, v[:, 1] - y0, "-", lw=1.4, color=colours.get(form, "#ff7f0e"))
+        seen.setdefault(form, []).append(pl.length_2d)
+    handles = [plt.Line2D([], [], color=colours.get(k, "#ff7f0e"), lw=2, label=f"{k}: {len(v)} lines, {sum(v):,.0f} m")
+               for k, v in sorted(seen.items())]
+    return _finish_line_map(fig, ax, handles, bool(reference), "reference", span_x, span_y, x0, y0, title, path, dpi)

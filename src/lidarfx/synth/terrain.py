@@ -16,6 +16,7 @@ import numpy as np
 from ._common import (
     capture_params,
     check_finite,
+    check_fraction,
     check_length,
     check_nonneg,
     check_origin,
@@ -58,6 +59,9 @@ def terrain(
     ditch_offset: float = -10.0,
     relief: float = 0.3,
     breakline_step: float = 2.0,
+    vegetation: float = 0.0,
+    vegetation_density: float | None = None,
+    off_terrain: float = 0.0,
     seed: int = 0,
     origin: Any = None,
 ):
@@ -91,14 +95,21 @@ def terrain(
         random tilt of at most 1 %).
     breakline_step:
         Vertex spacing (m) of the truth polylines.
+    vegetation, vegetation_density, off_terrain:
+        Share of the tile covered by shrub and tree patches (discs of 2–6 m
+        radius), their points per m² (default: the ground density) at 0.2–8 m
+        above the ground (class 3 below 0.5 m, 4 below 2 m, else 5), and the
+        share of them wrongly left in the ground class 2 (off-terrain points a
+        breakline or DTM method must resist).  0 = bare ground (the default:
+        the scene is then the same as without these parameters).
     seed, origin:
         Random seed; shift added to all coordinates (truth stays local).
 
     Returns
     -------
     PointCloud
-        Attributes ``classification`` (2 = ground everywhere) and ``landform``
-        (:data:`LANDFORMS`).  ``meta["truth"]["breaklines"]``: list of
+        Attributes ``classification`` (2 = ground everywhere, vegetation 3 / 4 / 5
+        or wrongly 2) and ``landform`` (:data:`LANDFORMS`, −1 = vegetation).  ``meta["truth"]["breaklines"]``: list of
         ``{"kind", "side", "points"}`` with ``points`` a polyline
         ``[[x, y, z], ...]`` and ``kind`` one of ``dike_crest``, ``dike_toe``,
         ``ditch_edge``, ``ditch_bottom``; ``side`` is ``left`` / ``right`` of
@@ -121,6 +132,10 @@ def terrain(
         check_finite(name, v)
     relief = check_nonneg("relief", relief)
     step = check_positive("breakline_step", breakline_step)
+    vegetation = check_fraction("vegetation", vegetation)
+    off_terrain = check_fraction("off_terrain", off_terrain)
+    if vegetation_density is not None:
+        vegetation_density = check_positive("vegetation_density", vegetation_density)
     origin = check_origin(origin)
     rng = make_rng(seed)
 
@@ -171,6 +186,28 @@ def terrain(
     landform[d2 < bottom_half + ditch_slope_w] = LANDFORMS["ditch_slope"]
     landform[d2 <= bottom_half] = LANDFORMS["ditch_bottom"]
     xyz = np.column_stack([xy, z])
+    classification = np.full(len(xyz), 2, dtype=np.uint8)
+    n_veg = n_off = 0
+    if vegetation > 0:
+        # patches: discs of 2-6 m radius at random centres until the covered share is reached
+        area, centres, radii = size * size, [], []
+        while sum(math.pi * r * r for r in radii) < vegetation * area:
+            centres.append(rng.uniform(-half, half, 2))
+            radii.append(float(rng.uniform(2.0, 6.0)))
+        c, r = np.array(centres), np.array(radii)
+        dens = density if vegetation_density is None else vegetation_density
+        cand = sample_rect(rng, (-half, half), (-half, half), dens, "random")
+        dist = np.linalg.norm(cand[:, None, :] - c[None, :, :], axis=2) / r[None, :]
+        vxy = cand[(dist <= 1.0).any(axis=1)]
+        h = 0.2 + 7.8 * rng.uniform(0.0, 1.0, len(vxy)) ** 2  # more low than high returns
+        vz = surface(vxy) + h
+        vcls = np.where(h < 0.5, 3, np.where(h < 2.0, 4, 5)).astype(np.uint8)
+        wrong = rng.uniform(0.0, 1.0, len(vxy)) < off_terrain
+        vcls[wrong] = 2
+        n_veg, n_off = len(vxy), int(wrong.sum())
+        xyz = np.vstack([xyz, np.column_stack([vxy, vz])])
+        classification = np.concatenate([classification, vcls])
+        landform = np.concatenate([landform, np.full(len(vxy), -1, np.int32)])
 
     # ---- breaklines
     def inside(p: np.ndarray) -> np.ndarray:
@@ -208,5 +245,6 @@ def terrain(
                   "bottom_width": ditch_bottom_width},
         "tile": {"min": [-half, -half], "max": [half, half]},
     }
-    attrs = {"classification": np.full(len(xyz), 2, dtype=np.uint8), "landform": landform}
+    truth["vegetation"] = {"points": n_veg, "off_terrain": n_off}
+    attrs = {"classification": classification, "landform": landform}
     return finish("terrain", xyz, attrs, truth, params, origin)

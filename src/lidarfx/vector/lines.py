@@ -549,21 +549,24 @@ def chain_segments(segments: list[LineSegment], *, join: float, min_angle: float
     return out
 
 
-def douglas_peucker(vertices: np.ndarray, tolerance: float, *, closed: bool = False) -> np.ndarray:
+def douglas_peucker(vertices: np.ndarray, tolerance: float, *, closed: bool = False,
+                    return_index: bool = False) -> np.ndarray:
     """3-D Douglas–Peucker: the fewest vertices (kept from ``vertices``) such that no
     dropped vertex lies farther than ``tolerance`` from the simplified polyline.
     The first and last vertices stay; a closed ring keeps its first vertex and the
-    vertex farthest from it."""
+    vertex farthest from it.  ``return_index``: the indices of the kept vertices
+    (ascending) instead, so that per-vertex values can follow them."""
     v = np.asarray(vertices, dtype=np.float64)
     if tolerance < 0 or not math.isfinite(tolerance):
         raise LidarfxError(f"simplification tolerance must be >= 0, got {tolerance!r}")
     if len(v) <= 2:
-        return v.copy()
+        return np.arange(len(v)) if return_index else v.copy()
     if closed:
         far = int(np.argmax(np.linalg.norm(v - v[0], axis=1)))
-        a = douglas_peucker(v[: far + 1], tolerance)
-        b = douglas_peucker(np.vstack([v[far:], v[:1]]), tolerance)
-        return np.vstack([a, b[1:-1]])
+        ia = douglas_peucker(v[: far + 1], tolerance, return_index=True)
+        ib = douglas_peucker(np.vstack([v[far:], v[:1]]), tolerance, return_index=True)
+        idx = np.concatenate([ia, far + ib[1:-1]])
+        return idx if return_index else v[idx]
     keep = np.zeros(len(v), bool)
     keep[0] = keep[-1] = True
     stack = [(0, len(v) - 1)]
@@ -585,7 +588,7 @@ def douglas_peucker(vertices: np.ndarray, tolerance: float, *, closed: bool = Fa
             m = i + 1 + k
             keep[m] = True
             stack += [(i, m), (m, j)]
-    return v[keep]
+    return np.flatnonzero(keep) if return_index else v[keep]
 
 
 def polyline_of(vertices: np.ndarray, *, support: int = 0, rms: float = math.nan, kind: str = "line",

@@ -1,0 +1,633 @@
+"""Structure lines (breaklines) of ALS terrain (seed 004, Mandlburger & Briese 2009; SPEC §6).
+
+Steps of :func:`extract_breaklines`:
+
+1. **Ground points**: the classes given (default 2), else the ground filter.
+2. **Curvature**: a quadric per point in a sphere of radius r (the feature
+   engine's curvature group) gives the principal curvatures; k_max is the one
+   of larger magnitude, k_min the other.
+3. **Start points**: |k_max| above the threshold (default: 6 standard deviations
+   of k_max — the smaller of its robust spread over the tile and the spread the
+   ground noise alone gives, 8σ/(r²√60)) and |k_min| ≤ ``curvature_ratio`` · |k_max|
+   — a linear break in slope, not a bump.  Convex breaks (crests, edges:
+   k_max < 0) and concave ones (toes, bottoms: k_max > 0) are kept apart.  Each
+   start point gets the 2-D direction of the start points of its kind around
+   it (principal axis); the strongest come first.
+4. **Patch pairs**: around a point p on the line and its direction u, the
+   ground points left and right of the line (a gap g either side, patches of
+   ``patch_width`` × ``patch_length``) are fitted by planes z = a + b·s + c·t
+   (s across, t along the line) by least squares with robust weights:
+   Kraus–Pfeifer-style, points far above the plane (vegetation left in the
+   ground class) lose their weight fast, points far below slowly.  The two
+   planes intersect in the 3-D structure line; its position across the line
+   and its height carry σ from the adjustment (the planes' covariances
+   propagated), the angle between the planes is the intersection angle.
+5. **Growing**: from a start point the patch pair is moved onto the line
+   (iterated), then stepped forward and backward by ``step`` along the current
+   direction while the intersection angle (≥ ``min_angle``), the point support
+   (≥ ``min_points`` per patch), the fit (RMS ≤ ``max_rms``) and a smooth course
+   (turn ≤ 30° per step) hold.  Start points near a line of their kind are used up.
+6. **Post-processing**: parts whose ends meet (within ``join``, directions
+   agreeing) are connected, lines shorter than ``min_length`` dropped, the rest
+   thinned by 3-D Douglas–Peucker (``simplify``), keeping each kept vertex's σ and angle.
+
+Optional 2-D approximations (``approximations``: polylines in x, y) replace
+step 3: start points are taken along them, every ``step``, with their direction.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from .cloud import PointCloud
+from .errors import LidarfxError, check_int
+from .vector.polyline import Polyline
+
+__all__ = ["DEFAULTS", "Breaklines", "extract_breaklines", "line_distances"]
+
+DEFAULTS: dict[str, Any] = {
+    "radius": None,  # curvature radius; None = about 60 ground points in the circle
+    "min_curvature": None,  # 1/m; None = 6 standard deviations of k_max (robust spread, or the noise's)
+    "curvature_ratio": 0.5,  # |k_min| <= ratio * |k_max|: a line, not a bump
+    # lengths: None = a multiple of the mean point spacing a = 1/sqrt(density) (the value at 4 pts/m², a = 0.5 m)
+    "patch_length": None,  # 12 a (6 m) along the line
+    "patch_width": None,  # 5 a (2.5 m) across, each side
+    "gap": None,  # 0.6 a (0.3 m) either side of the line left out of the patches
+    "step": None,  # 4 a (2 m) between vertices
+    "min_angle": 8.0,  # degrees between the two planes
+    "min_points": 8,  # per patch
+    "max_rms": None,  # m; None = 1.3 x the noise of the ground (median plane_std): a patch is one plane
+    "min_length": 10.0,  # m (2-D)
+    "join": None,  # 8 a (4 m) between ends of parts that are connected
+    "simplify": 0.05,  # m, 3-D Douglas-Peucker tolerance
+    "classes": (2,),
+}
+"""Parameters of :func:`extract_breaklines`."""
+
+_MAX_TURN = math.radians(30.0)
+
+
+@dataclass
+class Breaklines:
+    """Result of :func:`extract_breaklines`: ``lines`` (:class:`~lidarfx.vector.Polyline`, kind
+    ``"breakline"``, world coordinates; attrs ``form`` convex / concave, ``mean_angle``,
+    ``mean_sigma_xy``, ``mean_sigma_z`` and per vertex ``sigma_xy``, ``sigma_z``, ``angle``),
+    ``ground`` (the ground mask used) and ``meta`` (parameters, counts, timings)."""
+
+    lines: list[Polyline]
+    ground: np.ndarray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- robust patch planes
+def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, iterations: int = 6):
+    """z = a + b·s + c·t by iteratively reweighted least squares.  Weights: 1 within
+    ±2σ; above the plane 1/(1 + ((r − 2σ)/σ)⁴), 0 beyond 6σ (off-terrain points);
+    below 1/(1 + ((|r| − 3σ)/(2σ))²) (the other side of a nearby break).  σ is
+    1.4826 × the median absolute deviation of the residuals, at least ``sigma0``.  Returns ``(params, cov, rms,
+    n_effective, share_above)`` or ``None``: ``rms`` over the points not more than 3σ
+    above the plane, ``share_above`` the share of those left out."""
+    a = np.column_stack([np.ones_like(s), s, t])
+    w = np.ones(len(z))
+    sig = sigma0
+    p = None
+    for _ in range(iterations):
+        aw = a * w[:, None]
+        n = aw.T @ a
+        if np.linalg.cond(n) > 1e10:
+            return None
+        p = np.linalg.solve(n, aw.T @ z)
+        r = z - a @ p
+        sig = max(sigma0, 1.4826 * float(np.median(np.abs(r - np.median(r)))))
+        w = np.ones(len(z))
+        up = r > 2.0 * sig
+        w[up] = 1.0 / (1.0 + ((r[up] - 2.0 * sig) / sig) ** 4)
+        w[r > 6.0 * sig] = 0.0
+        dn = r < -3.0 * sig
+        w[dn] = 1.0 / (1.0 + ((-r[dn] - 3.0 * sig) / (2.0 * sig)) ** 2)
+    if p is None:
+        return None
+    aw = a * w[:, None]
+    n = aw.T @ a
+    ne = float(w.sum())
+    if ne < 3 or np.linalg.cond(n) > 1e10:
+        return None
+    r = z - a @ p
+    dof = max(ne - 3.0, 1.0)
+    s0 = math.sqrt(float((w * r * r).sum()) / dof)
+    cov = np.linalg.inv(n) * max(s0, 1e-6) ** 2
+    kept = r <= 3.0 * sig  # all but the points above the plane (vegetation): a bent patch shows here
+    rms = math.sqrt(float((r[kept] ** 2).mean())) if kept.any() else math.inf
+    return p, cov, rms, ne, 1.0 - float(kept.mean())
+
+
+@dataclass
+class _Vertex:
+    xy: np.ndarray
+    z: float
+    u: np.ndarray
+    sigma_xy: float
+    sigma_z: float
+    angle: float
+    support: int
+    offset: float
+
+
+class _Model:
+    """Patch pairs on the ground points (local coordinates)."""
+
+    def __init__(self, xyz: np.ndarray, prm: dict[str, Any], sigma0: float, max_rms: float):
+        from scipy.spatial import cKDTree
+
+        self.xyz = xyz
+        self.tree = cKDTree(xyz[:, :2])
+        self.prm = prm
+        self.sigma0 = sigma0
+        self.max_rms = max_rms
+        self.reach = math.hypot(prm["patch_length"] / 2.0, prm["gap"] + prm["patch_width"])
+        self.widths = [prm["patch_width"] * 0.8 ** k for k in range(7)]  # down to a quarter
+
+    def pair(self, p: np.ndarray, u: np.ndarray) -> _Vertex | None:
+        prm = self.prm
+        idx = self.tree.query_ball_point(p, self.reach)
+        if len(idx) < 2 * prm["min_points"]:
+            return None
+        q = self.xyz[idx]
+        nl = np.array([-u[1], u[0]])
+        d = q[:, :2] - p
+        t = d @ u
+        s = d @ nl
+        half = prm["patch_length"] / 2.0
+        g = prm["gap"]
+        inside = np.abs(t) <= half
+        fits = []
+        for side in (1.0, -1.0):
+            ss = s * side
+            fit = None
+            for w in self.widths:  # the widest patch that is one plane (narrow ditch bottoms, crests)
+                m = inside & (ss >= g) & (ss <= g + w)
+                if m.sum() < prm["min_points"]:
+                    break
+                f = _robust_plane(s[m], t[m], q[m, 2], self.sigma0)
+                if f is None or f[3] < prm["min_points"] or f[2] > self.max_rms or f[4] > 0.3:
+                    continue
+                # one plane: the outer quarter of the patch must not bend away (a second break)
+                res = q[m, 2] - (f[0][0] + f[0][1] * s[m] + f[0][2] * t[m])
+                outer = ss[m] >= g + 0.75 * w
+                sig = max(self.sigma0, f[2])
+                if outer.sum() >= 3:
+                    mo = float(np.median(res[outer]))
+                    if abs(mo) > max(0.5 * sig, 2.5 * sig / math.sqrt(outer.sum())):
+                        continue
+                fit = (*f, int(m.sum()), w)
+                break
+            if fit is None:
+                return None
+            fits.append(fit)
+        (pl, cl, _, _, _, nl_pts, wl), (pr, cr, _, _, _, nr_pts, wr) = fits
+        db = pl[1] - pr[1]
+        if abs(db) < 1e-6:
+            return None
+        da = pl[0] - pr[0]
+        s0 = -da / db
+        if (s0 > 0 and s0 > g + wl / 2.0) or (s0 < 0 and -s0 > g + wr / 2.0):
+            return None  # the planes meet outside the gap: the patches straddle another break
+        dsdt = -(pl[2] - pr[2]) / db
+        z0 = pl[0] + pl[1] * s0
+        near = inside & (np.abs(s - s0 - dsdt * t) <= max(g, 0.5))
+        if near.sum() >= 3:  # the points around the line must lie on the two planes' roof (or trough)
+            sn, tn = s[near], t[near]
+            za = pl[0] + pl[1] * sn + pl[2] * tn
+            zb = pr[0] + pr[1] * sn + pr[2] * tn
+            convex = (pl[0] + pl[1] * (s0 - 1.0)) > (pr[0] + pr[1] * (s0 - 1.0))
+            model = np.minimum(za, zb) if convex else np.maximum(za, zb)
+            if abs(float(np.median(q[near, 2] - model))) > 3.0 * max(self.sigma0, 0.02):
+                return None  # a third face between the planes (a narrow bottom or crest): not one line
+        # error propagation of (s0, z0) from the six plane parameters
+        j_s = np.array([-1.0 / db, da / db ** 2, 0.0, 1.0 / db, -da / db ** 2, 0.0])
+        j_z = np.array([1.0, s0, 0.0, 0.0, 0.0, 0.0]) + pl[1] * j_s
+        cov = np.zeros((6, 6))
+        cov[:3, :3], cov[3:, 3:] = cl, cr
+        var_s = float(j_s @ cov @ j_s)
+        var_z = float(j_z @ cov @ j_z)
+        n1 = np.array([-pl[1], -pl[2], 1.0])
+        n2 = np.array([-pr[1], -pr[2], 1.0])
+        ang = math.degrees(math.acos(min(1.0, abs(n1 @ n2) / (np.linalg.norm(n1) * np.linalg.norm(n2)))))
+        if ang < prm["min_angle"]:
+            return None
+        un = u + dsdt * nl
+        un = un / np.linalg.norm(un)
+        return _Vertex(p + s0 * nl, float(z0), un, math.sqrt(max(var_s, 0.0)), math.sqrt(max(var_z, 0.0)), ang,
+                       nl_pts + nr_pts, float(s0))
+
+    def settle(self, p: np.ndarray, u: np.ndarray, rounds: int = 4) -> _Vertex | None:
+        """Move the patch pair onto the line: intersect, recentre, repeat."""
+        v = None
+        for _ in range(rounds):
+            v = self.pair(p, u)
+            if v is None:
+                return None
+            if abs(v.offset) < 0.02 and abs(float(v.u @ u)) > math.cos(math.radians(1.0)):
+                return v
+            p, u = v.xy, v.u
+        return v
+
+    def grow(self, v0: _Vertex, direction: float, stop) -> list[_Vertex]:
+        out: list[_Vertex] = []
+        cur = v0
+        step = self.prm["step"]
+        for _ in range(100_000):
+            u = cur.u * direction
+            p = cur.xy + step * u
+            if stop(p):
+                break
+            v = self.settle(p, u, rounds=2)
+            if v is None:
+                break
+            if float(v.u @ u) < 0:
+                v.u = -v.u
+            if math.acos(min(1.0, float(v.u @ u))) > _MAX_TURN:
+                break
+            lat = float((v.xy - p) @ np.array([-u[1], u[0]]))
+            if abs(lat) > step * math.tan(_MAX_TURN):
+                break
+            if np.linalg.norm(v.xy - cur.xy) < 0.25 * step:
+                break  # not advancing
+            v.u = v.u * direction
+            out.append(v)
+            cur = v
+        return out
+
+
+# --------------------------------------------------------------------------- helpers
+def _check(name: str, value: Any, lo: float, hi: float, *, open_lo: bool = True) -> float:
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value > hi or value < lo or (open_lo and value == lo):
+        raise LidarfxError(f"{name} must be a number in {'(' if open_lo else '['}{lo:g}, {hi:g}], got {value!r}")
+    return float(value)
+
+
+def _directions(xy: np.ndarray, tree, idx: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """2-D principal direction and elongation λ2/λ1 of the start points within ``radius`` of each."""
+    dirs = np.full((len(idx), 2), np.nan)
+    ratio = np.full(len(idx), np.inf)
+    nb = tree.query_ball_point(xy[idx], radius)
+    for k, lst in enumerate(nb):
+        if len(lst) < 5:
+            continue
+        q = xy[lst] - xy[lst].mean(axis=0)
+        w, v = np.linalg.eigh(q.T @ q)
+        dirs[k] = v[:, 1]
+        ratio[k] = w[0] / max(w[1], 1e-12)
+    return dirs, ratio
+
+
+def _near_lines(lines: list[np.ndarray], pts: np.ndarray, dist: float) -> np.ndarray:
+    """Points within ``dist`` (2-D) of any of the polylines."""
+    from .vector.lines import point_polyline_distance
+
+    near = np.zeros(len(pts), bool)
+    if not len(pts):
+        return near
+    p3 = np.column_stack([pts, np.zeros(len(pts))])
+    for ln in lines:
+        v = np.column_stack([ln[:, :2], np.zeros(len(ln))]) if len(ln) >= 2 else None
+        if v is None:
+            continue
+        lo, hi = ln[:, :2].min(axis=0) - dist, ln[:, :2].max(axis=0) + dist
+        box = np.flatnonzero(np.all((pts >= lo) & (pts <= hi), axis=1) & ~near)
+        if len(box):
+            near[box[point_polyline_distance(p3[box], v) <= dist]] = True
+    return near
+
+
+def _join(parts: list[dict], join: float) -> list[dict]:
+    """Connect parts of one form whose ends are within ``join`` and whose directions agree."""
+    parts = list(parts)
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(parts)):
+            for j in range(i + 1, len(parts)):
+                a, b = parts[i], parts[j]
+                if a["form"] != b["form"]:
+                    continue
+                best = None
+                for ra in (False, True):
+                    va = a["v"][::-1] if ra else a["v"]
+                    for rb in (False, True):
+                        vb = b["v"][::-1] if rb else b["v"]
+                        gap = float(np.linalg.norm(va[-1, :2] - vb[0, :2]))
+                        if gap > join:
+                            continue
+                        da = va[-1, :2] - va[max(len(va) - 3, 0), :2]
+                        db = vb[min(2, len(vb) - 1), :2] - vb[0, :2]
+                        if np.linalg.norm(da) == 0 or np.linalg.norm(db) == 0:
+                            continue
+                        c = float(da @ db) / (np.linalg.norm(da) * np.linalg.norm(db))
+                        if c < math.cos(math.radians(30.0)) or (best is not None and gap >= best[0]):
+                            continue
+                        best = (gap, ra, rb)
+                if best is None:
+                    continue
+                _, ra, rb = best
+                sa = slice(None, None, -1) if ra else slice(None)
+                sb = slice(None, None, -1) if rb else slice(None)
+                parts[i] = {"form": a["form"], **{k: np.concatenate([a[k][sa], b[k][sb]]) for k in ("v", "sxy", "sz", "ang")},
+                            "support": a["support"] + b["support"]}
+                del parts[j]
+                merged = True
+                break
+            if merged:
+                break
+    return parts
+
+
+def _length_2d(v: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(v[:, :2], axis=0), axis=1).sum()) if len(v) > 1 else 0.0
+
+
+# --------------------------------------------------------------------------- main
+def extract_breaklines(
+    cloud: PointCloud,
+    *,
+    radius: float | None = DEFAULTS["radius"],
+    min_curvature: float | None = DEFAULTS["min_curvature"],
+    curvature_ratio: float = DEFAULTS["curvature_ratio"],
+    patch_length: float | None = DEFAULTS["patch_length"],
+    patch_width: float | None = DEFAULTS["patch_width"],
+    gap: float | None = DEFAULTS["gap"],
+    step: float | None = DEFAULTS["step"],
+    min_angle: float = DEFAULTS["min_angle"],
+    min_points: int = DEFAULTS["min_points"],
+    max_rms: float | None = DEFAULTS["max_rms"],
+    min_length: float = DEFAULTS["min_length"],
+    join: float | None = DEFAULTS["join"],
+    simplify: float = DEFAULTS["simplify"],
+    classes: Sequence[int] | None = DEFAULTS["classes"],
+    approximations: Sequence[Any] | None = None,
+    progress: bool | None = None,
+) -> Breaklines:
+    """Structure lines of the terrain: 3-D lines where the slope breaks (module docstring).
+
+    ``classes``: ground classes (default 2; the ground filter runs when the cloud has
+    none of them; ``None`` = every point is ground).  ``approximations``: optional 2-D
+    (or 3-D) polylines near the lines, used instead of the curvature start points.
+    The other parameters: :data:`DEFAULTS` and the docs.
+    """
+    from .features import feature_arrays
+    from .vector.lines import douglas_peucker
+
+    if not isinstance(cloud, PointCloud):
+        raise LidarfxError("extract_breaklines expects a PointCloud (see lidarfx.read)")
+    lengths = {"patch_length": (patch_length, 12.0, True), "patch_width": (patch_width, 5.0, True),
+               "gap": (gap, 0.6, False), "step": (step, 4.0, True), "join": (join, 8.0, False)}
+    for name, (val, _, open_lo) in lengths.items():
+        if val is not None:
+            _check(name, val, 0.0, 1e4, open_lo=open_lo)
+    prm = {
+        "min_angle": _check("min_angle", min_angle, 0.0, 90.0, open_lo=False),
+        "min_points": check_int("min_points", min_points, 3, 10**6),
+    }
+    curvature_ratio = _check("curvature_ratio", curvature_ratio, 0.0, 1.0)
+    min_length = _check("min_length", min_length, 0.0, 1e6, open_lo=False)
+    simplify = _check("simplify", simplify, 0.0, 1e4, open_lo=False)
+    if radius is not None:
+        radius = _check("radius", radius, 0.0, 1e4)
+    if min_curvature is not None:
+        min_curvature = _check("min_curvature", min_curvature, 0.0, 1e6)
+    if max_rms is not None:
+        max_rms = _check("max_rms", max_rms, 0.0, 1e4)
+    approx = None
+    if approximations is not None:
+        approx = []
+        for a in approximations:
+            v = np.asarray(getattr(a, "vertices", a), dtype=np.float64)
+            if v.ndim != 2 or v.shape[1] < 2 or len(v) < 2 or not np.isfinite(v[:, :2]).all():
+                raise LidarfxError("each approximation must be a polyline of at least 2 points (x, y[, z])")
+            approx.append(v[:, :2])
+    t0 = time.perf_counter()
+
+    # 1. ground
+    n = len(cloud)
+    if classes is None:
+        ground = np.ones(n, bool)
+    else:
+        cls_codes = [int(c) for c in classes]
+        ground = np.isin(np.asarray(cloud["classification"]), cls_codes) if "classification" in cloud else np.zeros(n, bool)
+        if not ground.any():
+            from .ground import classify_ground
+
+            ground = np.asarray(classify_ground(cloud), bool)
+    gi = np.flatnonzero(ground & np.isfinite(cloud.xyz).all(axis=1))
+    if len(gi) < 30:
+        raise LidarfxError(f"only {len(gi)} ground points; breaklines need a terrain of at least 30 points")
+    origin = cloud.xyz[gi].min(axis=0)
+    g = cloud.xyz[gi] - origin
+    ext = g.max(axis=0) - g.min(axis=0)
+    area = max(float(ext[0] * ext[1]), 1e-9)
+    rho = len(g) / area
+    r = radius if radius is not None else float(f"{math.sqrt(60.0 / (math.pi * rho)):.2g}")
+    spacing = 1.0 / math.sqrt(rho)
+    for name, (val, factor, _) in lengths.items():
+        prm[name] = float(val) if val is not None else float(f"{factor * spacing:.2g}")
+    join = prm.pop("join")
+    t1 = time.perf_counter()
+
+    # 2. curvature (quadric per point)
+    f = feature_arrays(g, ["k1", "k2", "plane_std"], radius=r, progress=progress)
+    k1, k2 = np.asarray(f["k1"], np.float64), np.asarray(f["k2"], np.float64)
+    big = np.abs(k1) >= np.abs(k2)
+    kmax = np.where(big, k1, k2)
+    kmin = np.where(big, k2, k1)
+    ok = np.isfinite(kmax) & np.isfinite(kmin)
+    ps = np.asarray(f["plane_std"], np.float64)
+    sigma0 = float(np.nanmedian(ps)) if np.isfinite(ps).any() else 0.05
+    sigma0 = max(sigma0, 0.005)
+    if max_rms is None:  # a patch is one plane when it fits about as well as the ground's noise
+        max_rms = 1.3 * sigma0
+    if min_curvature is None:
+        # 6 standard deviations of k_max, the smaller of: its robust spread over the tile, and the spread
+        # the ground noise alone gives a quadric of ~60 points in the radius (8 σ / (r² √n); rough terrain
+        # widens the first, a mostly flat tile the second)
+        med = float(np.median(kmax[ok])) if ok.any() else 0.0
+        mad = float(np.median(np.abs(kmax[ok] - med))) * 1.4826 if ok.any() else 0.0
+        min_curvature = 6.0 * min(mad, 8.0 * sigma0 / (r * r * math.sqrt(60.0)))
+    t2 = time.perf_counter()
+
+    # 3. start points
+    model = _Model(g, prm, 0.5 * sigma0 if sigma0 > 0 else 0.01, max_rms)
+    from scipy.spatial import cKDTree
+
+    seeds: list[tuple[int, np.ndarray, np.ndarray]] = []  # (form, xy, u)
+    start_mask = ok & (np.abs(kmax) >= min_curvature) & (np.abs(kmin) <= curvature_ratio * np.abs(kmax))
+    forms = np.where(kmax < 0, 0, 1)  # 0 convex (crest, edge), 1 concave (toe, bottom)
+    pools: dict[int, dict[str, Any]] = {}
+    if approx is None:
+        for form in (0, 1):
+            idx = np.flatnonzero(start_mask & (forms == form))
+            if not len(idx):
+                continue
+            xy = g[idx, :2]
+            tree = cKDTree(xy)
+            order = np.argsort(-np.abs(kmax[idx]), kind="stable")
+            dirs, ratio = _directions(xy, tree, np.arange(len(idx)), r)
+            good = order[ratio[order] < 0.25]
+            pools[form] = {"xy": xy, "used": np.zeros(len(idx), bool), "tree": tree}
+            seeds += [(form, k, dirs[k]) for k in good]
+    else:
+        for a in approx:
+            seg = np.diff(a, axis=0)
+            for p0, d in zip(a[:-1], seg):
+                ln = float(np.linalg.norm(d))
+                if ln == 0:
+                    continue
+                u = d / ln
+                for s in np.arange(0.0, ln, prm["step"]):
+                    seeds.append((-1, p0 + s * u - origin[:2], u))
+    t3 = time.perf_counter()
+
+    # 4. + 5. model and grow
+    parts: list[dict] = []
+    done: dict[int, list[np.ndarray]] = {0: [], 1: [], -1: []}
+    consume = max(0.75 * r, 1.0)
+    tried = 0
+    for form, key, u in seeds:
+        if form >= 0:
+            pool = pools[form]
+            if pool["used"][key]:
+                continue
+            p = pool["xy"][key]
+        else:
+            p = key
+            if done[-1] and _near_lines(done[-1], p[None, :], consume)[0]:
+                continue
+        tried += 1
+        v0 = model.settle(p, np.asarray(u, dtype=np.float64))
+        if form >= 0:  # a failed start uses up only its close neighbours: a narrow bottom's lines lie near
+            near = pool["tree"].query_ball_point(p, 0.25 * r if v0 is None else 0.5 * r)
+            pool["used"][near] = True
+        if v0 is None:
+            continue
+        fwd = model.grow(v0, 1.0, lambda q, f=form: bool(done[f]) and _near_lines(done[f], q[None, :], 0.5 * consume)[0])
+        bwd = model.grow(v0, -1.0, lambda q, f=form: bool(done[f]) and _near_lines(done[f], q[None, :], 0.5 * consume)[0])
+        verts = bwd[::-1] + [v0] + fwd
+        if len(verts) < 2:
+            continue
+        vx = np.array([[*v.xy, v.z] for v in verts])
+        lf = form
+        if form < 0:  # approximations: the form from the planes' order
+            lf = 0
+        part = {"form": lf, "v": vx, "sxy": np.array([v.sigma_xy for v in verts]),
+                "sz": np.array([v.sigma_z for v in verts]), "ang": np.array([v.angle for v in verts]),
+                "support": int(sum(v.support for v in verts))}
+        parts.append(part)
+        done[form].append(vx)
+        if form >= 0:
+            pool["used"] |= _near_lines([vx], pool["xy"], consume)
+    t4 = time.perf_counter()
+
+    # 6. post-processing
+    parts = _join(parts, join)
+    lines: list[Polyline] = []
+    for pt in parts:
+        if _length_2d(pt["v"]) < min_length:
+            continue
+        keep = douglas_peucker(pt["v"], simplify, return_index=True) if simplify > 0 else np.arange(len(pt["v"]))
+        v = pt["v"][keep] + origin
+        lines.append(Polyline(
+            v, support=pt["support"], rms=math.nan, kind="breakline",
+            attrs={"form": "convex" if pt["form"] == 0 else "concave",
+                   "mean_angle": round(float(pt["ang"].mean()), 3),
+                   "mean_sigma_xy": round(float(pt["sxy"].mean()), 4),
+                   "mean_sigma_z": round(float(pt["sz"].mean()), 4),
+                   "sigma_xy": [round(float(x), 4) for x in pt["sxy"][keep]],
+                   "sigma_z": [round(float(x), 4) for x in pt["sz"][keep]],
+                   "angle": [round(float(x), 3) for x in pt["ang"][keep]]}))
+    lines.sort(key=lambda ln: -ln.length_2d)
+    t5 = time.perf_counter()
+    meta = {
+        "points": n, "ground_points": int(len(gi)), "density": rho,
+        "parameters": {**prm, "radius": r, "min_curvature": float(min_curvature), "curvature_ratio": curvature_ratio,
+                       "max_rms": float(max_rms), "min_length": min_length, "join": join, "simplify": simplify,
+                       "classes": None if classes is None else [int(c) for c in classes],
+                       "approximations": None if approx is None else len(approx)},
+        "noise": sigma0,
+        "start_points": int(start_mask.sum()) if approx is None else 0,
+        "seeds_tried": tried,
+        "parts": len(parts),
+        "lines": len(lines),
+        "total_length": float(sum(ln.length_2d for ln in lines)),
+        "seconds": {"ground": round(t1 - t0, 3), "curvature": round(t2 - t1, 3), "start": round(t3 - t2, 3),
+                    "grow": round(t4 - t3, 3), "post": round(t5 - t4, 3)},
+    }
+    return Breaklines(lines, ground, meta)
+
+
+def line_distances(lines: Sequence[Any], reference: Sequence[Any], *, step: float = 0.5, within: float = 1.0) -> dict:
+    """Compare lines with reference lines (both polylines in x, y, z).
+
+    The reference is densified every ``step``; for each of its points the 3-D and 2-D
+    distance to the nearest line and the height difference there are measured, and
+    likewise for the lines against the reference.  Returns ``completeness`` (share of the
+    reference length within ``within`` (2-D) of a line), ``correctness`` (share of the
+    line length within ``within`` of the reference), and over the matched reference
+    points: ``rms_xy``, ``rms_z``, ``mean_3d``, ``rms_3d``; ``reference_length``, ``length``.
+    """
+    from .vector.lines import point_polyline_distance
+
+    def dense(ls):
+        out = []
+        for ln in ls:
+            v = np.asarray(getattr(ln, "vertices", ln), dtype=np.float64)
+            for a, b in zip(v[:-1], v[1:]):
+                k = max(int(math.ceil(np.linalg.norm(b[:2] - a[:2]) / step)), 1)
+                out.append(a + (b - a) * (np.arange(k)[:, None] / k))
+            out.append(v[-1:])
+        return np.vstack(out) if out else np.zeros((0, 3))
+
+    def nearest(p: np.ndarray, ls) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """2-D distance to the nearest line, the 3-D distance to it, and the height
+        difference to the line at the plan-view foot point."""
+        d2 = np.full(len(p), np.inf)
+        d3 = np.full(len(p), np.inf)
+        dz = np.full(len(p), np.nan)
+        for ln in ls:
+            v = np.asarray(getattr(ln, "vertices", ln), dtype=np.float64)
+            a, b = v[:-1], v[1:]
+            ab = b[:, :2] - a[:, :2]
+            ll = np.maximum((ab * ab).sum(axis=1), 1e-12)
+            for lo in range(0, len(p), 4096):
+                q = p[lo:lo + 4096]
+                t = np.clip(((q[:, None, :2] - a[None, :, :2]) * ab[None]).sum(axis=2) / ll[None], 0.0, 1.0)
+                foot = a[None, :, :] + t[:, :, None] * (b - a)[None, :, :]
+                dd = np.linalg.norm(q[:, None, :2] - foot[:, :, :2], axis=2)
+                k = np.argmin(dd, axis=1)
+                best = dd[np.arange(len(q)), k]
+                sel = best < d2[lo:lo + 4096]
+                rows = np.flatnonzero(sel) + lo
+                d2[rows] = best[sel]
+                dz[rows] = q[sel, 2] - foot[np.flatnonzero(sel), k[sel], 2]
+            d3 = np.minimum(d3, point_polyline_distance(p, v))
+        return d2, d3, dz
+
+    ref = dense(reference)
+    got = dense(lines)
+    out: dict[str, Any] = {"reference_length": float(sum(_length_2d(np.asarray(getattr(r, "vertices", r))) for r in reference)),
+                           "length": float(sum(_length_2d(np.asarray(getattr(r, "vertices", r))) for r in lines))}
+    if not len(ref) or not len(got):
+        return {**out, "completeness": 0.0, "correctness": 0.0, "rms_xy": math.nan, "rms_z": math.nan,
+                "mean_3d": math.nan, "rms_3d": math.nan}
+    d2, d3, dz = nearest(ref, lines)
+    m = d2 <= within
+    g2, _, _ = nearest(got, reference)
+    out.update(completeness=float(m.mean()), correctness=float((g2 <= within).mean()),
+               rms_xy=float(np.sqrt((d2[m] ** 2).mean())) if m.any() else math.nan,
+               rms_z=float(np.sqrt((dz[m] ** 2).mean())) if m.any() else math.nan,
+               mean_3d=float(d3.mean()), rms_3d=float(np.sqrt((d3 ** 2).mean())),
+               mean_3d_matched=float(d3[m].mean()) if m.any() else math.nan)
+    return out
