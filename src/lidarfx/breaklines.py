@@ -21,14 +21,20 @@ Steps of :func:`extract_breaklines`:
    ground class) lose their weight fast, points far below slowly.  The two
    planes intersect in the 3-D structure line; its position across the line
    and its height carry σ from the adjustment (the planes' covariances
-   propagated), the angle between the planes is the intersection angle.
+   propagated), the angle between the planes is the intersection angle.  When
+   the points along the line lie off the two planes' ridge (or trough), a third,
+   narrow face lies between them (a ditch bottom): it is fitted too, and its edge
+   nearer to the trial line is taken.
 5. **Growing**: from a start point the patch pair is moved onto the line
    (iterated), then stepped forward and backward by ``step`` along the current
    direction while the intersection angle (≥ ``min_angle``), the point support
    (≥ ``min_points`` per patch), the fit (RMS ≤ ``max_rms``) and a smooth course
-   (turn ≤ 30° per step) hold.  Start points near a line of their kind are used up.
+   (turn ≤ 30° per step) hold.  Start points within 1.5 point spacings of a line
+   of their kind are used up; a start point that fails is retried one spacing to
+   either side (it may lie between two close lines).
 6. **Post-processing**: parts whose ends meet (within ``join``, directions
-   agreeing) are connected, lines shorter than ``min_length`` dropped, the rest
+   agreeing) are connected, a part running mostly within 1.5 point spacings of a
+   longer one of its form is dropped, lines shorter than ``min_length`` dropped, the rest
    thinned by 3-D Douglas–Peucker (``simplify``), keeping each kept vertex's σ and angle.
 
 Optional 2-D approximations (``approximations``: polylines in x, y) replace
@@ -125,6 +131,27 @@ def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, it
     return p, cov, rms, ne, 1.0 - float(kept.mean())
 
 
+def _intersect(pa, ca, pb, cb):
+    """Line of the planes z = a + b·s + c·t (parameters ``pa``, ``pb``, covariances ``ca``, ``cb``):
+    ``(s0, ds/dt, z0, var_s0, var_z0, angle°)`` at t = 0, or ``None`` for (nearly) parallel planes."""
+    db = pa[1] - pb[1]
+    if abs(db) < 1e-6:
+        return None
+    da = pa[0] - pb[0]
+    s0 = -da / db
+    dsdt = -(pa[2] - pb[2]) / db
+    z0 = pa[0] + pa[1] * s0
+    # error propagation of (s0, z0) from the six plane parameters
+    j_s = np.array([-1.0 / db, da / db ** 2, 0.0, 1.0 / db, -da / db ** 2, 0.0])
+    j_z = np.array([1.0, s0, 0.0, 0.0, 0.0, 0.0]) + pa[1] * j_s
+    cov = np.zeros((6, 6))
+    cov[:3, :3], cov[3:, 3:] = ca, cb
+    n1 = np.array([-pa[1], -pa[2], 1.0])
+    n2 = np.array([-pb[1], -pb[2], 1.0])
+    ang = math.degrees(math.acos(min(1.0, abs(n1 @ n2) / (np.linalg.norm(n1) * np.linalg.norm(n2)))))
+    return s0, dsdt, z0, float(j_s @ cov @ j_s), float(j_z @ cov @ j_z), ang
+
+
 @dataclass
 class _Vertex:
     xy: np.ndarray
@@ -135,6 +162,7 @@ class _Vertex:
     angle: float
     support: int
     offset: float
+    twin: float | None = None  # a narrow middle face: offset (along the left normal) of its other edge
 
 
 class _Model:
@@ -151,7 +179,10 @@ class _Model:
         self.reach = math.hypot(prm["patch_length"] / 2.0, prm["gap"] + prm["patch_width"])
         self.widths = [prm["patch_width"] * 0.8 ** k for k in range(7)]  # down to a quarter
 
-    def pair(self, p: np.ndarray, u: np.ndarray) -> _Vertex | None:
+    def pair(self, p: np.ndarray, u: np.ndarray, prefer: float | bool | None = None) -> _Vertex | None:
+        """The structure line near ``p`` along ``u`` from a patch pair, or ``None``.  Where a narrow
+        face lies between the two planes, the edge nearer to ``p`` (``prefer`` > 0: the left
+        one, < 0: the right one; ``False``: none) comes back, with the other edge's offset."""
         prm = self.prm
         idx = self.tree.query_ball_point(p, self.reach)
         if len(idx) < 2 * prm["min_points"]:
@@ -189,46 +220,52 @@ class _Model:
                 return None
             fits.append(fit)
         (pl, cl, _, _, _, nl_pts, wl), (pr, cr, _, _, _, nr_pts, wr) = fits
-        db = pl[1] - pr[1]
-        if abs(db) < 1e-6:
+        x = _intersect(pl, cl, pr, cr)
+        if x is None:
             return None
-        da = pl[0] - pr[0]
-        s0 = -da / db
+        s0, dsdt, z0, var_s, var_z, ang = x
         if (s0 > 0 and s0 > g + wl / 2.0) or (s0 < 0 and -s0 > g + wr / 2.0):
             return None  # the planes meet outside the gap: the patches straddle another break
-        dsdt = -(pl[2] - pr[2]) / db
-        z0 = pl[0] + pl[1] * s0
+        twin = None
         near = inside & (np.abs(s - s0 - dsdt * t) <= max(g, 0.5))
         if near.sum() >= 3:  # the points around the line must lie on the two planes' roof (or trough)
-            sn, tn = s[near], t[near]
-            za = pl[0] + pl[1] * sn + pl[2] * tn
-            zb = pr[0] + pr[1] * sn + pr[2] * tn
+            za = pl[0] + pl[1] * s + pl[2] * t
+            zb = pr[0] + pr[1] * s + pr[2] * t
             convex = (pl[0] + pl[1] * (s0 - 1.0)) > (pr[0] + pr[1] * (s0 - 1.0))
-            model = np.minimum(za, zb) if convex else np.maximum(za, zb)
-            if abs(float(np.median(q[near, 2] - model))) > 3.0 * max(self.sigma0, 0.02):
-                return None  # a third face between the planes (a narrow bottom or crest): not one line
-        # error propagation of (s0, z0) from the six plane parameters
-        j_s = np.array([-1.0 / db, da / db ** 2, 0.0, 1.0 / db, -da / db ** 2, 0.0])
-        j_z = np.array([1.0, s0, 0.0, 0.0, 0.0, 0.0]) + pl[1] * j_s
-        cov = np.zeros((6, 6))
-        cov[:3, :3], cov[3:, 3:] = cl, cr
-        var_s = float(j_s @ cov @ j_s)
-        var_z = float(j_z @ cov @ j_z)
-        n1 = np.array([-pl[1], -pl[2], 1.0])
-        n2 = np.array([-pr[1], -pr[2], 1.0])
-        ang = math.degrees(math.acos(min(1.0, abs(n1 @ n2) / (np.linalg.norm(n1) * np.linalg.norm(n2)))))
+            res = q[:, 2] - (np.minimum(za, zb) if convex else np.maximum(za, zb))
+            lim = 2.0 * max(self.sigma0, 0.02)
+            dev = float(np.median(res[near]))
+            if abs(dev) <= lim:
+                pass
+            elif (dev > 0) == convex or prefer is False:
+                return None  # the surface bulges the other way: no face between the two planes
+            else:
+                # a narrow face between the planes (a ditch bottom, a crest): fit it, keep the edge nearer to p
+                sign = 1.0 if dev > 0 else -1.0
+                mid = inside & (np.abs(s - s0 - dsdt * t) <= prm["patch_width"]) & (sign * res > 2.0 * max(self.sigma0, 0.02))
+                if mid.sum() < prm["min_points"]:
+                    return None
+                fm = _robust_plane(s[mid], t[mid], q[mid, 2], self.sigma0)
+                if fm is None or fm[2] > self.max_rms:
+                    return None
+                xl, xr = _intersect(pl, cl, fm[0], fm[1]), _intersect(fm[0], fm[1], pr, cr)
+                if xl is None or xr is None or not (xl[0] > xr[0]):
+                    return None  # the left edge must lie left of the right one
+                pick, other = (xl, xr) if (abs(xl[0]) <= abs(xr[0]) if prefer is None else prefer > 0) else (xr, xl)
+                s0, dsdt, z0, var_s, var_z, ang = pick
+                twin = other[0] - s0
         if ang < prm["min_angle"]:
             return None
         un = u + dsdt * nl
         un = un / np.linalg.norm(un)
         return _Vertex(p + s0 * nl, float(z0), un, math.sqrt(max(var_s, 0.0)), math.sqrt(max(var_z, 0.0)), ang,
-                       nl_pts + nr_pts, float(s0))
+                       nl_pts + nr_pts, float(s0), twin)
 
-    def settle(self, p: np.ndarray, u: np.ndarray, rounds: int = 4) -> _Vertex | None:
+    def settle(self, p: np.ndarray, u: np.ndarray, rounds: int = 4, prefer: float | None = None) -> _Vertex | None:
         """Move the patch pair onto the line: intersect, recentre, repeat."""
         v = None
-        for _ in range(rounds):
-            v = self.pair(p, u)
+        for k in range(rounds):
+            v = self.pair(p, u, prefer if k == 0 else None)
             if v is None:
                 return None
             if abs(v.offset) < 0.02 and abs(float(v.u @ u)) > math.cos(math.radians(1.0)):
@@ -345,6 +382,21 @@ def _join(parts: list[dict], join: float) -> list[dict]:
             if merged:
                 break
     return parts
+
+
+def _drop_shadowed(parts: list[dict], dist: float) -> list[dict]:
+    """Drop a part that runs for more than half its length within ``dist`` (2-D) of a longer part
+    of the same form: two lines that close are one line modelled twice (e.g. a V through a
+    narrow ditch bottom beside the bottom's own edges)."""
+    order = sorted(range(len(parts)), key=lambda i: -_length_2d(parts[i]["v"]))
+    kept: list[int] = []
+    for i in order:
+        v = parts[i]["v"]
+        others = [parts[j]["v"] for j in kept if parts[j]["form"] == parts[i]["form"]]
+        if others and len(v) >= 2 and _near_lines(others, v[:, :2], dist).mean() > 0.5:
+            continue
+        kept.append(i)
+    return [parts[i] for i in sorted(kept)]
 
 
 def _length_2d(v: np.ndarray) -> float:
@@ -494,7 +546,7 @@ def extract_breaklines(
     # 4. + 5. model and grow
     parts: list[dict] = []
     done: dict[int, list[np.ndarray]] = {0: [], 1: [], -1: []}
-    consume = max(0.75 * r, 1.0)
+    consume = 1.5 * spacing  # start points this close to a line of their kind are used up
     tried = 0
     for form, key, u in seeds:
         if form >= 0:
@@ -507,7 +559,12 @@ def extract_breaklines(
             if done[-1] and _near_lines(done[-1], p[None, :], consume)[0]:
                 continue
         tried += 1
-        v0 = model.settle(p, np.asarray(u, dtype=np.float64))
+        u = np.asarray(u, dtype=np.float64)
+        v0 = None
+        for off in (0.0, spacing, -spacing):  # a start point between two close lines: try beside it
+            v0 = model.settle(p + off * np.array([-u[1], u[0]]), u)
+            if v0 is not None:
+                break
         if form >= 0:  # a failed start uses up only its close neighbours: a narrow bottom's lines lie near
             near = pool["tree"].query_ball_point(p, 0.25 * r if v0 is None else 0.5 * r)
             pool["used"][near] = True
@@ -533,6 +590,7 @@ def extract_breaklines(
 
     # 6. post-processing
     parts = _join(parts, join)
+    parts = _drop_shadowed(parts, consume)
     lines: list[Polyline] = []
     for pt in parts:
         if _length_2d(pt["v"]) < min_length:
