@@ -122,6 +122,10 @@ def test_approximations_replace_the_start_points(terrain):
     d = line_distances(res.lines, [crest])
     assert d["completeness"] >= 0.9 and d["rms_xy"] <= 0.1
     assert res.meta["start_points"] == 0
+    assert {ln.attrs["form"] for ln in res.lines if ln.length_2d > 50} == {"convex"}  # a crest
+    toe = np.asarray([b["points"] for b in cloud.meta["truth"]["breaklines"] if b["kind"] == "dike_toe"][0])
+    res = extract_breaklines(cloud, approximations=[toe[::10, :2]])
+    assert {ln.attrs["form"] for ln in res.lines if ln.length_2d > 50} == {"concave"}  # a toe
 
 
 def test_refuses_bad_input():

@@ -577,8 +577,10 @@ def extract_breaklines(
             continue
         vx = np.array([[*v.xy, v.z] for v in verts])
         lf = form
-        if form < 0:  # approximations: the form from the planes' order
-            lf = 0
+        if form < 0:  # approximations: the form from the sign of k_max at the ground points nearest the vertices
+            _, near_idx = model.tree.query(vx[:, :2])
+            kn = kmax[near_idx]
+            lf = 0 if np.nanmedian(kn) < 0 else 1
         part = {"form": lf, "v": vx, "sxy": np.array([v.sigma_xy for v in verts]),
                 "sz": np.array([v.sigma_z for v in verts]), "ang": np.array([v.angle for v in verts]),
                 "support": int(sum(v.support for v in verts))}
