@@ -21,10 +21,9 @@ Steps of :func:`extract_breaklines`:
    ground class) lose their weight fast, points far below slowly.  The two
    planes intersect in the 3-D structure line; its position across the line
    and its height carry σ from the adjustment (the planes' covariances
-   propagated), the angle between the planes is the intersection angle.  When
-   the points along the line lie off the two planes' ridge (or trough), a third,
-   narrow face lies between them (a ditch bottom): it is fitted too, and its edge
-   nearer to the trial line is taken.
+   propagated), the angle between the planes is the intersection angle.  A pair
+   whose points along the line lie off the two planes' ridge (or trough) is
+   refused: a third, narrow face lies between them (a ditch bottom).
 5. **Growing**: from a start point the patch pair is moved onto the line
    (iterated), then stepped forward and backward by ``step`` along the current
    direction while the intersection angle (≥ ``min_angle``), the point support
@@ -162,7 +161,6 @@ class _Vertex:
     angle: float
     support: int
     offset: float
-    twin: float | None = None  # a narrow middle face: offset (along the left normal) of its other edge
 
 
 class _Model:
@@ -179,10 +177,8 @@ class _Model:
         self.reach = math.hypot(prm["patch_length"] / 2.0, prm["gap"] + prm["patch_width"])
         self.widths = [prm["patch_width"] * 0.8 ** k for k in range(7)]  # down to a quarter
 
-    def pair(self, p: np.ndarray, u: np.ndarray, prefer: float | bool | None = None) -> _Vertex | None:
-        """The structure line near ``p`` along ``u`` from a patch pair, or ``None``.  Where a narrow
-        face lies between the two planes, the edge nearer to ``p`` (``prefer`` > 0: the left
-        one, < 0: the right one; ``False``: none) comes back, with the other edge's offset."""
+    def pair(self, p: np.ndarray, u: np.ndarray) -> _Vertex | None:
+        """The structure line near ``p`` along ``u`` from a patch pair, or ``None``."""
         prm = self.prm
         idx = self.tree.query_ball_point(p, self.reach)
         if len(idx) < 2 * prm["min_points"]:
@@ -226,46 +222,26 @@ class _Model:
         s0, dsdt, z0, var_s, var_z, ang = x
         if (s0 > 0 and s0 > g + wl / 2.0) or (s0 < 0 and -s0 > g + wr / 2.0):
             return None  # the planes meet outside the gap: the patches straddle another break
-        twin = None
         near = inside & (np.abs(s - s0 - dsdt * t) <= max(g, 0.5))
         if near.sum() >= 3:  # the points around the line must lie on the two planes' roof (or trough)
-            za = pl[0] + pl[1] * s + pl[2] * t
-            zb = pr[0] + pr[1] * s + pr[2] * t
+            za = pl[0] + pl[1] * s[near] + pl[2] * t[near]
+            zb = pr[0] + pr[1] * s[near] + pr[2] * t[near]
             convex = (pl[0] + pl[1] * (s0 - 1.0)) > (pr[0] + pr[1] * (s0 - 1.0))
-            res = q[:, 2] - (np.minimum(za, zb) if convex else np.maximum(za, zb))
-            lim = 2.0 * max(self.sigma0, 0.02)
-            dev = float(np.median(res[near]))
-            if abs(dev) <= lim:
-                pass
-            elif (dev > 0) == convex or prefer is False:
-                return None  # the surface bulges the other way: no face between the two planes
-            else:
-                # a narrow face between the planes (a ditch bottom, a crest): fit it, keep the edge nearer to p
-                sign = 1.0 if dev > 0 else -1.0
-                mid = inside & (np.abs(s - s0 - dsdt * t) <= prm["patch_width"]) & (sign * res > 2.0 * max(self.sigma0, 0.02))
-                if mid.sum() < prm["min_points"]:
-                    return None
-                fm = _robust_plane(s[mid], t[mid], q[mid, 2], self.sigma0)
-                if fm is None or fm[2] > self.max_rms:
-                    return None
-                xl, xr = _intersect(pl, cl, fm[0], fm[1]), _intersect(fm[0], fm[1], pr, cr)
-                if xl is None or xr is None or not (xl[0] > xr[0]):
-                    return None  # the left edge must lie left of the right one
-                pick, other = (xl, xr) if (abs(xl[0]) <= abs(xr[0]) if prefer is None else prefer > 0) else (xr, xl)
-                s0, dsdt, z0, var_s, var_z, ang = pick
-                twin = other[0] - s0
+            res = q[near, 2] - (np.minimum(za, zb) if convex else np.maximum(za, zb))
+            if abs(float(np.median(res))) > 2.0 * max(self.sigma0, 0.02):
+                return None  # a third face between the planes (a narrow bottom or crest): not one line
         if ang < prm["min_angle"]:
             return None
         un = u + dsdt * nl
         un = un / np.linalg.norm(un)
         return _Vertex(p + s0 * nl, float(z0), un, math.sqrt(max(var_s, 0.0)), math.sqrt(max(var_z, 0.0)), ang,
-                       nl_pts + nr_pts, float(s0), twin)
+                       nl_pts + nr_pts, float(s0))
 
-    def settle(self, p: np.ndarray, u: np.ndarray, rounds: int = 4, prefer: float | None = None) -> _Vertex | None:
+    def settle(self, p: np.ndarray, u: np.ndarray, rounds: int = 4) -> _Vertex | None:
         """Move the patch pair onto the line: intersect, recentre, repeat."""
         v = None
-        for k in range(rounds):
-            v = self.pair(p, u, prefer if k == 0 else None)
+        for _ in range(rounds):
+            v = self.pair(p, u)
             if v is None:
                 return None
             if abs(v.offset) < 0.02 and abs(float(v.u @ u)) > math.cos(math.radians(1.0)):
