@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 import tempfile
 import time
@@ -35,7 +34,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", default=None, help="also write every number to this JSON file")
     args = p.parse_args(argv)
     sys.path.insert(0, str(HERE))
-    from bench_features import ensure_lidarfx_importable
+    from bench_features import best_of, ensure_lidarfx_importable, run_process
 
     ensure_lidarfx_importable()
     import lidarfx
@@ -54,18 +53,10 @@ def main(argv=None) -> int:
         lidarfx.write(cloud, src)
         small = work / "small.laz"
         lidarfx.write(lidarfx.synth.terrain(size=60.0, **kw), small)
-        subprocess.run([sys.executable, "-m", "lidarfx", "breaklines", str(small), str(work / "w.geojson"), "-q"],
-                       check=True, capture_output=True)
+        run_process([sys.executable, "-m", "lidarfx", "breaklines", str(small), str(work / "w.geojson"), "-q"])
         out = work / "lines.geojson"
         cmd = [sys.executable, "-m", "lidarfx", "breaklines", str(src), str(out), "-q"]
-        times = []
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
-            r = subprocess.run(cmd, capture_output=True, text=True)
-            if r.returncode:
-                raise SystemExit(r.stderr)
-            times.append(time.perf_counter() - t0)
-        res["cli_seconds"] = min(times)
+        res["cli_seconds"] = best_of(lambda: run_process(cmd), args.repeat)
         lines, _ = read_geojson(out)
         truth = cloud.meta["truth"]["breaklines"]
         res["kinds"] = {}

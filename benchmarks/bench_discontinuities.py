@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -39,7 +38,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", default=None, help="also write every number to this JSON file")
     args = p.parse_args(argv)
     sys.path.insert(0, str(HERE))
-    from bench_features import ensure_lidarfx_importable, peak_rss_mb
+    from bench_features import best_of, ensure_lidarfx_importable, peak_rss_mb, run_process
 
     ensure_lidarfx_importable()
     import numpy as np
@@ -62,17 +61,10 @@ def main(argv=None) -> int:
         small = work / "small.laz"
         lidarfx.write(probe, small)
         warm = [sys.executable, "-m", "lidarfx", "discontinuities", str(small), str(work / "warm"), "-q", *sc_args]
-        subprocess.run(warm, check=True, capture_output=True)
+        run_process(warm)
         out = work / "out"
         cmd = [sys.executable, "-m", "lidarfx", "discontinuities", str(src), str(out), "-q", *sc_args]
-        times = []
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
-            r = subprocess.run(cmd, capture_output=True, text=True)
-            if r.returncode:
-                raise SystemExit(r.stderr)
-            times.append(time.perf_counter() - t0)
-        res["cli_seconds"] = min(times)
+        res["cli_seconds"] = best_of(lambda: run_process(cmd), args.repeat)
         res["peak_rss_mb"], res["peak_rss_method"] = peak_rss_mb(cmd)
         doc = json.loads((out / "sets.json").read_text())
         got = lidarfx.read(out / "cloud.laz")

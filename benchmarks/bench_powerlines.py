@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -41,7 +40,7 @@ def main(argv=None) -> int:
         print(f"skipped: {REAL} not found")
         return 0
     sys.path.insert(0, str(HERE))
-    from bench_features import ensure_lidarfx_importable
+    from bench_features import best_of, ensure_lidarfx_importable, run_process
 
     ensure_lidarfx_importable()
     import numpy as np
@@ -61,15 +60,8 @@ def main(argv=None) -> int:
         io.write(cloud, src)
         out = work / "out"
         cmd = [sys.executable, "-m", "lidarfx", "powerlines", str(src), str(out), "--load-case", "temp=80", "-q"]
-        r = subprocess.run(cmd, capture_output=True, text=True)  # warm-up
-        if r.returncode:
-            raise SystemExit(r.stderr)
-        times = []
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
-            subprocess.run(cmd, check=True, capture_output=True)
-            times.append(time.perf_counter() - t0)
-        res["cli_seconds"] = min(times)
+        run_process(cmd)  # warm-up
+        res["cli_seconds"] = best_of(lambda: run_process(cmd), args.repeat)
         got = io.read(out / "cloud.laz")
         pred = np.asarray(got["classification"]) == 14
         tp = int((pred & (ref == 14)).sum())

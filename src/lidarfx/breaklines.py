@@ -49,7 +49,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .cloud import PointCloud
-from .errors import LidarfxError, check_int
+from .errors import LidarfxError, check_int, check_number
 from .vector.polyline import Polyline
 
 __all__ = ["DEFAULTS", "Breaklines", "extract_breaklines", "line_distances"]
@@ -277,13 +277,6 @@ class _Model:
 
 
 # --------------------------------------------------------------------------- helpers
-def _check(name: str, value: Any, lo: float, hi: float, *, open_lo: bool = True) -> float:
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or value > hi or value < lo or (open_lo and value == lo):
-        raise LidarfxError(f"{name} must be a number in {'(' if open_lo else '['}{lo:g}, {hi:g}], got {value!r}")
-    return float(value)
-
-
 def _directions(xy: np.ndarray, tree, idx: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """2-D principal direction and elongation λ2/λ1 of the start points within ``radius`` of each."""
     dirs = np.full((len(idx), 2), np.nan)
@@ -416,20 +409,20 @@ def extract_breaklines(
                "gap": (gap, 0.6, False), "step": (step, 4.0, True), "join": (join, 8.0, False)}
     for name, (val, _, open_lo) in lengths.items():
         if val is not None:
-            _check(name, val, 0.0, 1e4, open_lo=open_lo)
+            check_number(name, val, 0.0, 1e4, open_lo=open_lo)
     prm = {
-        "min_angle": _check("min_angle", min_angle, 0.0, 90.0, open_lo=False),
+        "min_angle": check_number("min_angle", min_angle, 0.0, 90.0, open_lo=False),
         "min_points": check_int("min_points", min_points, 3, 10**6),
     }
-    curvature_ratio = _check("curvature_ratio", curvature_ratio, 0.0, 1.0)
-    min_length = _check("min_length", min_length, 0.0, 1e6, open_lo=False)
-    simplify = _check("simplify", simplify, 0.0, 1e4, open_lo=False)
+    curvature_ratio = check_number("curvature_ratio", curvature_ratio, 0.0, 1.0, open_lo=True)
+    min_length = check_number("min_length", min_length, 0.0, 1e6, open_lo=False)
+    simplify = check_number("simplify", simplify, 0.0, 1e4, open_lo=False)
     if radius is not None:
-        radius = _check("radius", radius, 0.0, 1e4)
+        radius = check_number("radius", radius, 0.0, 1e4, open_lo=True)
     if min_curvature is not None:
-        min_curvature = _check("min_curvature", min_curvature, 0.0, 1e6)
+        min_curvature = check_number("min_curvature", min_curvature, 0.0, 1e6, open_lo=True)
     if max_rms is not None:
-        max_rms = _check("max_rms", max_rms, 0.0, 1e4)
+        max_rms = check_number("max_rms", max_rms, 0.0, 1e4, open_lo=True)
     approx = None
     if approximations is not None:
         approx = []

@@ -27,6 +27,21 @@ def check_int(name: str, value, lo: int, hi: int, *, hi_text: str | None = None,
     return v
 
 
+def check_number(name: str, value, lo: float, hi: float, *, open_lo: bool = False) -> float:
+    """``value`` as a finite float in ``[lo, hi]`` (``(lo, hi]`` with ``open_lo``; bools and
+    strings do not pass), else the one-line error "NAME must be a number in [LO, HI], got VALUE"."""
+    import math
+
+    try:
+        is_bool = isinstance(value, bool) or getattr(getattr(value, "dtype", None), "kind", "") == "b"
+        v = float(value) if not is_bool and not isinstance(value, (str, bytes)) else math.nan
+    except (TypeError, ValueError, OverflowError):
+        v = math.nan
+    if not (math.isfinite(v) and lo <= v <= hi) or (open_lo and v == lo):
+        raise LidarfxError(f"{name} must be a number in {'(' if open_lo else '['}{lo:g}, {hi:g}], got {value!r}")
+    return v
+
+
 def check_seed(seed) -> int:
     """A random seed as numpy, numba and scikit-learn take it: an integer in 0 .. 2**32 - 1
     (the one rule of every seeded option: ``classify --seed``, ``features --seed``)."""

@@ -67,9 +67,16 @@ def plane_basis(normal: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     direction − 90°), ``e2 = n × e1`` lies in the plane pointing up-dip, and
     ``e1 × e2 = n``.  For a horizontal plane ``e1 = x``.
     """
-    n = unit(normal)
+    e1, e2, n = plane_bases(unit(normal)[None, :])
+    return e1[0], e2[0], n[0]
+
+
+def plane_bases(normals: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`plane_basis` of every row of an ``(n, 3)`` array of unit normals: ``(e1, e2, n)``."""
+    n = np.asarray(normals, dtype=np.float64)
     h = np.cross(EZ, n)  # horizontal, perpendicular to n: the strike direction
-    e1 = EX.copy() if np.linalg.norm(h) < 1e-12 else unit(h)
+    hn = np.linalg.norm(h, axis=1, keepdims=True)
+    e1 = np.where(hn < 1e-12, EX, h / np.maximum(hn, 1e-300))
     e2 = np.cross(n, e1)
     return e1, e2, n
 

@@ -37,9 +37,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import LidarfxError, check_int
-from ..geometry import dip_from_normal, fit_plane, group_hull_areas
-from .stats import axial_angle, find_sets, fisher_stats
+from ..errors import LidarfxError, check_int, check_number
+from ..geometry import dip_from_normal, fit_plane, group_hull_areas, plane_bases
+from .stats import axial_angle, check_search_options, find_sets, fisher_stats
 
 __all__ = ["DEFAULTS", "Discontinuities", "analyse_discontinuities", "parse_reference_plane"]
 
@@ -139,14 +139,6 @@ def _check_scanners(scanner: Any) -> np.ndarray | None:
     return s
 
 
-def _check_number(name: str, value: Any, lo: float, hi: float, *, open_lo: bool = False) -> float:
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or value < lo or value > hi or (open_lo and value == lo):
-        rng = f"({lo:g}, {hi:g}]" if open_lo else f"[{lo:g}, {hi:g}]"
-        raise LidarfxError(f"{name} must be a number in {rng}, got {value!r}")
-    return float(value)
-
-
 def _outward_sign(normals: np.ndarray, points: np.ndarray, scanners: np.ndarray | None, face: np.ndarray) -> np.ndarray:
     """+1 / −1 per row so that ``sign · normal`` points out of the rock: towards the scanners
     (the mean of the unit directions to them), else along the face's outward normal."""
@@ -177,15 +169,6 @@ def _group_planes(local: np.ndarray, gid: np.ndarray, k: int):
     return c, n, np.clip(w[:, ::-1], 0.0, None), cnt
 
 
-def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Strike (horizontal) and up-dip unit vectors of each plane (rows), as :func:`lidarfx.geometry.plane_basis`."""
-    h = np.cross(np.array([0.0, 0.0, 1.0]), normals)
-    hn = np.linalg.norm(h, axis=1, keepdims=True)
-    e1 = np.where(hn < 1e-12, np.array([1.0, 0.0, 0.0]), h / np.maximum(hn, 1e-300))
-    e2 = np.cross(normals, e1)
-    return e1, e2
-
-
 def _group_range(values: np.ndarray, gid: np.ndarray, k: int) -> np.ndarray:
     lo = np.full(k, np.inf)
     hi = np.full(k, -np.inf)
@@ -196,7 +179,7 @@ def _group_range(values: np.ndarray, gid: np.ndarray, k: int) -> np.ndarray:
 
 def _segment_extents(local: np.ndarray, gid: np.ndarray, k: int, normals: np.ndarray):
     """Per group: hull area in its plane, trace length (largest extent), strike and dip extents."""
-    e1, e2 = _frames(normals)
+    e1, e2, _ = plane_bases(normals)
     u = (local * e1[gid]).sum(axis=1)
     v = (local * e2[gid]).sum(axis=1)
     area = group_hull_areas(np.column_stack([u, v]), gid) if len(gid) else np.zeros(k)
@@ -294,20 +277,18 @@ def analyse_discontinuities(
     ref = parse_reference_plane(reference_plane, scanners)
     if ref is None:
         ref = parse_reference_plane("horizontal" if scanners is not None else "fit", scanners)
-    r = default_radius(cloud) if radius is None else _check_number("radius", radius, 0.0, 1e6, open_lo=True)
-    dmax = None if max_distance is None else _check_number("max_distance", max_distance, 0.0, 1e6, open_lo=True)
-    rgrow = 1.5 * r if growing_radius is None else _check_number("growing_radius", growing_radius, 0.0, 1e6, open_lo=True)
-    max_angle = _check_number("max_angle", max_angle, 0.0, 90.0, open_lo=True)
+    r = default_radius(cloud) if radius is None else check_number("radius", radius, 0.0, 1e6, open_lo=True)
+    dmax = None if max_distance is None else check_number("max_distance", max_distance, 0.0, 1e6, open_lo=True)
+    rgrow = 1.5 * r if growing_radius is None else check_number("growing_radius", growing_radius, 0.0, 1e6, open_lo=True)
+    max_angle = check_number("max_angle", max_angle, 0.0, 90.0, open_lo=True)
     min_segment_size = check_int("min_segment_size", min_segment_size, 2, 10**9)
-    min_planarity = _check_number("min_planarity", min_planarity, 0.0, 1.0)
-    overhang_angle = _check_number("overhang_angle", overhang_angle, -90.0, 90.0)
+    min_planarity = check_number("min_planarity", min_planarity, 0.0, 1.0)
+    overhang_angle = check_number("overhang_angle", overhang_angle, -90.0, 90.0)
     if min_width is not None:
-        min_width = _check_number("min_width", min_width, 0.0, 1e6)
+        min_width = check_number("min_width", min_width, 0.0, 1e6)
     if n_sets is not None:
         n_sets = check_int("n_sets", n_sets, 1, 50)
-    # the set search checks its own numbers; check them before the expensive part
-    find_sets(np.array([[0.0, 0.0, 1.0]]), n_sets=n_sets, bandwidth=bandwidth, separation=separation, cone=cone,
-              min_share=min_share)
+    check_search_options(n_sets=n_sets, bandwidth=bandwidth, separation=separation, cone=cone, min_share=min_share)
     t0 = time.perf_counter()
 
     # 1. local planes

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import LidarfxError
+from ..errors import LidarfxError, check_int, check_number
 
-__all__ = ["axial_angle", "axial_mean", "fisher_stats", "find_sets", "SetSearch"]
+__all__ = ["axial_angle", "axial_mean", "check_search_options", "fisher_stats", "find_sets", "SetSearch"]
 
 
 def _units(normals) -> np.ndarray:
@@ -129,6 +129,15 @@ def _assign(v: np.ndarray, means: np.ndarray, cone: float) -> np.ndarray:
     return np.where(ok, lab, -1).astype(np.int64)
 
 
+def check_search_options(*, n_sets=None, bandwidth=8.0, separation=20.0, cone=30.0, min_share=0.02) -> None:
+    """The options of :func:`find_sets`, checked (one-line :class:`LidarfxError`)."""
+    for name, val, lo, hi in (("bandwidth", bandwidth, 0.1, 45), ("separation", separation, 0.1, 90),
+                              ("cone", cone, 0.1, 90), ("min_share", min_share, 0.0, 1.0)):
+        check_number(name, val, lo, hi)
+    if n_sets is not None:
+        check_int("the number of sets", n_sets, 1, 50)
+
+
 def find_sets(
     normals,
     weights=None,
@@ -167,12 +176,7 @@ def find_sets(
         raise LidarfxError("weights need one value per normal")
     if np.any(~np.isfinite(w)) or np.any(w < 0):
         raise LidarfxError("weights must be finite and >= 0")
-    for name, val, lo, hi in (("bandwidth", bandwidth, 0.1, 45), ("separation", separation, 0.1, 90),
-                              ("cone", cone, 0.1, 90), ("min_share", min_share, 0.0, 1.0)):
-        if not (isinstance(val, (int, float)) and lo <= val <= hi):
-            raise LidarfxError(f"{name} must be a number in [{lo:g}, {hi:g}], got {val!r}")
-    if n_sets is not None and not (isinstance(n_sets, (int, np.integer)) and 1 <= n_sets <= 50):
-        raise LidarfxError(f"the number of sets must be a whole number from 1 to 50, got {n_sets!r}")
+    check_search_options(n_sets=n_sets, bandwidth=bandwidth, separation=separation, cone=cone, min_share=min_share)
     v = np.where(v[:, 2:3] < 0, -v, v)
     if len(v) == 0 or w.sum() <= 0:
         return SetSearch(np.zeros((0, 3)), np.full(len(v), -1, np.int64), np.zeros(0), [])
