@@ -38,7 +38,7 @@ def _roof(rng, noise, n=4000, slope_l=0.0, slope_r=0.5, line_s=0.2):
 
 def test_intersection_exact_and_sigma_matches_the_scatter():
     rng = np.random.default_rng(1)
-    m = _Model(_roof(rng, 0.0), PRM, 0.01, 0.2)
+    m = _Model(_roof(rng, 0.0), PRM, 0.01, 0.2, 0.15)
     v = m.pair(np.array([0.0, 0.0]), np.array([0.0, 1.0]))
     assert v.xy[0] == pytest.approx(0.2, abs=1e-9) and v.z == pytest.approx(2.0, abs=1e-9)
     assert v.angle == pytest.approx(math.degrees(math.atan(0.5)), abs=1e-6)
@@ -46,7 +46,7 @@ def test_intersection_exact_and_sigma_matches_the_scatter():
     got, sig_s, sig_z = [], [], []
     for k in range(60):
         pts = _roof(np.random.default_rng(100 + k), 0.05, n=400)
-        v = _Model(pts, PRM, 0.01, 0.3).settle(np.array([0.0, 0.0]), np.array([0.0, 1.0]))
+        v = _Model(pts, PRM, 0.01, 0.3, 0.5).settle(np.array([0.0, 0.0]), np.array([0.0, 1.0]))
         got.append((v.xy[0], v.z))
         sig_s.append(v.sigma_xy)
         sig_z.append(v.sigma_z)
@@ -54,6 +54,39 @@ def test_intersection_exact_and_sigma_matches_the_scatter():
     assert np.std(got[:, 0]) == pytest.approx(np.mean(sig_s), rel=0.35)
     assert np.std(got[:, 1]) == pytest.approx(np.mean(sig_z), rel=0.35)
     assert abs(np.mean(got[:, 0]) - 0.2) < 0.05
+
+
+def _ditch(rng, noise, density=4.0, bottom=1.0, depth=1.2, slope_w=1.5):
+    """A straight trapezoidal ditch along y: bottom |x| <= bottom/2, slopes slope_w wide, flat around."""
+    n = int(density * 12 * 12)
+    x, y = rng.uniform(-6, 6, n), rng.uniform(-6, 6, n)
+    d = np.abs(x) - bottom / 2.0
+    z = -depth + depth * np.clip(d / slope_w, 0.0, 1.0)
+    return np.column_stack([x, y, z + rng.normal(0, noise, n)])
+
+
+def test_narrow_face_gives_both_edges_of_a_ditch_bottom():
+    prm = dict(PRM, patch_length=6.0, patch_width=2.5, gap=0.3)
+    # noise-free, 4 pts/m²: both bottom edges, from trial lines in and beside the bottom's middle
+    for k, x0 in ((0, 0.0), (1, 0.25), (2, -0.2)):
+        m = _Model(_ditch(np.random.default_rng(k), 0.0), prm, 0.005, 0.013, 0.5)
+        a, b = m.narrow_face(np.array([x0, 0.0]), np.array([0.0, 1.0]))
+        assert sorted([a.xy[0], b.xy[0]]) == pytest.approx([-0.5, 0.5], abs=0.02)
+        assert a.z == pytest.approx(-1.2, abs=0.02) and b.z == pytest.approx(-1.2, abs=0.02)
+        assert a.angle == pytest.approx(math.degrees(math.atan(1.2 / 1.5)), abs=1.0)
+    # 4 pts/m², 5 cm noise: within 0.15 m, over several realisations
+    for k in range(5):
+        m = _Model(_ditch(np.random.default_rng(10 + k), 0.05), prm, 0.025, 0.065, 0.5)
+        got = m.narrow_face(np.array([0.0, 0.0]), np.array([0.0, 1.0]))
+        assert got is not None
+        assert sorted([got[0].xy[0], got[1].xy[0]]) == pytest.approx([-0.5, 0.5], abs=0.15)
+
+
+def test_narrow_face_leaves_a_single_break_alone():
+    prm = dict(PRM, patch_length=6.0, patch_width=2.5, gap=0.3)
+    for k in range(5):
+        pts = _roof(np.random.default_rng(30 + k), 0.05, n=400, slope_l=0.0, slope_r=0.5, line_s=0.0)
+        assert _Model(pts, prm, 0.025, 0.065, 0.5).narrow_face(np.array([0.0, 0.0]), np.array([0.0, 1.0])) is None
 
 
 def test_douglas_peucker_indices():

@@ -140,6 +140,10 @@ COMMANDS = {
     ("discontinuities",): ["{IN}", "out/dc", "-q"],
     ("colour",): ["{IN}", "out/o.laz", "--picture", "out/o.png", "-q"],
     ("breaklines",): ["{IN}", "out/o.geojson", "--csv", "--dxf", "out/o.dxf", "--picture", "out/o.png", "-q"],
+    ("thin",): ["{IN}", "out/o.laz", "--cell", "0.5", "-q"],
+    ("section",): ["{IN}", "out/o.laz", "--from", "0,5", "--to", "10,5", "--width", "1", "--image", "out/o.png", "--by", "z", "-q"],
+    ("parts",): ["{IN}", "out/pa", "-q"],
+    ("members",): ["{IN}", "out/o.geojson", "--csv", "--dxf", "out/o.dxf", "--picture", "out/o.png", "-q"],
 }
 
 

@@ -24,6 +24,8 @@ __all__ = [
     "analyse_discontinuities",
     "colour_cloud",
     "extract_breaklines",
+    "detect_small_parts",
+    "vectorise_members",
     "__version__",
 ]
 
@@ -66,8 +68,12 @@ def __getattr__(name: str):
         from .colour import colour_cloud
 
         return colour_cloud
+    if name in ("detect_small_parts", "vectorise_members"):
+        from . import tower
+
+        return getattr(tower, name)
     if name in ("synth", "select", "segment", "ground", "structures", "edges", "vector", "powerlines",
-                "discontinuities", "colour", "breaklines"):
+                "discontinuities", "colour", "breaklines", "tower", "thin", "section"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

@@ -31,7 +31,13 @@ Steps of :func:`extract_breaklines`:
    (turn ≤ 30° per step) hold.  Start points within 1.5 point spacings of a line
    of their kind are used up; a start point that fails is retried one spacing to
    either side (it may lie between two close lines).
-6. **Post-processing**: parts whose ends meet (within ``join``, directions
+6. **Narrow faces**: every vertex is tested for a third face between the two planes
+   (a ditch bottom or narrow crest a patch pair straddles): the profile across the
+   line is fitted as a continuous hinge and a continuous trapezoid (two knots) in a
+   window that shrinks until no fourth break lies in it; where the trapezoid wins by
+   BIC, with a wide enough middle face meeting both sides at ``min_angle``, runs of
+   such vertices are replaced by the face's two edges (:meth:`_Model.narrow_face`).
+7. **Post-processing**: parts whose ends meet (within ``join``, directions
    agreeing) are connected, a part running mostly within 1.5 point spacings of a
    longer one of its form is dropped, lines shorter than ``min_length`` dropped, the rest
    thinned by 3-D Douglas–Peucker (``simplify``), keeping each kept vertex's σ and angle.
@@ -89,6 +95,19 @@ class Breaklines:
 
 
 # --------------------------------------------------------------------------- robust patch planes
+def _kp_weights(r: np.ndarray, sig: float) -> np.ndarray:
+    """Kraus–Pfeifer-style weights of residuals ``r`` (z − surface): 1 within ±2σ; above
+    1/(1 + ((r − 2σ)/σ)⁴), 0 beyond 6σ (off-terrain points); below
+    1/(1 + ((|r| − 3σ)/(2σ))²) (the other side of a nearby break)."""
+    w = np.ones(len(r))
+    up = r > 2.0 * sig
+    w[up] = 1.0 / (1.0 + ((r[up] - 2.0 * sig) / sig) ** 4)
+    w[r > 6.0 * sig] = 0.0
+    dn = r < -3.0 * sig
+    w[dn] = 1.0 / (1.0 + ((-r[dn] - 3.0 * sig) / (2.0 * sig)) ** 2)
+    return w
+
+
 def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, iterations: int = 6):
     """z = a + b·s + c·t by iteratively reweighted least squares.  Weights: 1 within
     ±2σ; above the plane 1/(1 + ((r − 2σ)/σ)⁴), 0 beyond 6σ (off-terrain points);
@@ -108,12 +127,7 @@ def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, it
         p = np.linalg.solve(n, aw.T @ z)
         r = z - a @ p
         sig = max(sigma0, 1.4826 * float(np.median(np.abs(r - np.median(r)))))
-        w = np.ones(len(z))
-        up = r > 2.0 * sig
-        w[up] = 1.0 / (1.0 + ((r[up] - 2.0 * sig) / sig) ** 4)
-        w[r > 6.0 * sig] = 0.0
-        dn = r < -3.0 * sig
-        w[dn] = 1.0 / (1.0 + ((-r[dn] - 3.0 * sig) / (2.0 * sig)) ** 2)
+        w = _kp_weights(r, sig)
     if p is None:
         return None
     aw = a * w[:, None]
@@ -128,6 +142,89 @@ def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, it
     kept = r <= 3.0 * sig  # all but the points above the plane (vegetation): a bent patch shows here
     rms = math.sqrt(float((r[kept] ** 2).mean())) if kept.any() else math.inf
     return p, cov, rms, ne, 1.0 - float(kept.mean())
+
+
+def _profile_fits(s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray, k1: np.ndarray, k2: np.ndarray,
+                  middle: bool):
+    """Weighted least-squares fits of continuous piecewise-planar profiles across a line,
+    z = a + c·t + b₁·min(s − k1, 0) + b₂·max(s − k2, 0) [+ b₃·(clip(s, k1, k2) − k1)], one per knot
+    pair (``middle``: the trapezoid, else the hinge with k1 = k2).  Returns the best as
+    ``(wrss, k1, k2, params, residuals)`` or ``None``."""
+    ss = s[None, :]
+    cols = [np.ones((len(k1), len(s))), np.broadcast_to(t, (len(k1), len(s))),
+            np.minimum(ss - k1[:, None], 0.0), np.maximum(ss - k2[:, None], 0.0)]
+    if middle:
+        cols.append(np.clip(ss, k1[:, None], k2[:, None]) - k1[:, None])
+    a = np.stack(cols, axis=2)
+    at = np.ascontiguousarray((a * w[None, :, None]).transpose(0, 2, 1))
+    n = at @ a + 1e-9 * np.eye(a.shape[2])
+    b = at @ z
+    try:
+        x = np.linalg.solve(n, b[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        return None
+    rss = float(w @ (z * z)) - (x * b).sum(axis=1)  # weighted residual sum of squares of each fit
+    j = int(np.argmin(rss))
+    r = z - a[j] @ x[j]
+    return float(w @ (r * r)), float(k1[j]), float(k2[j]), x[j], r
+
+
+def _trapezoid(s, t, z, lim, coarse, fine, wmin, sigma0, max_rms):
+    """The narrow-face test of :meth:`_Model.narrow_face` in one window: ``False`` when the hinge
+    fits within ``max_rms`` (one break), ``None`` when the trapezoid does not fit within it either
+    (another break in the window) or loses by BIC, else ``(k1, k2, (left, middle, right slope))``."""
+    kv = np.arange(-lim, lim + 1e-9, coarse)
+    if len(kv) < 2:
+        return None
+
+    def weights(r):
+        return _kp_weights(r, max(sigma0, 1.4826 * float(np.median(np.abs(r)))))
+
+    def rms(fit):
+        """RMS over all points but those far above (vegetation): a bend the fit misses shows here."""
+        r = fit[4]
+        kept = r <= 3.0 * max(sigma0, 1.4826 * float(np.median(np.abs(r))))
+        return math.sqrt(float((r[kept] ** 2).mean())) if kept.any() else math.inf
+
+    w = np.ones(len(z))
+    for _ in range(2):
+        v = _profile_fits(s, t, z, w, kv, kv, False)
+        if v is None:
+            return None
+        w = weights(v[4])
+    v = _profile_fits(s, t, z, w, kv, kv, False)
+    if v is None:
+        return None
+    if rms(v) <= max_rms:
+        return False
+    g1, g2 = np.meshgrid(kv, kv, indexing="ij")
+    ok = (g2 - g1) >= wmin
+    tr = _profile_fits(s, t, z, w, g1[ok], g2[ok], True) if ok.any() else None
+    if tr is None:
+        return None
+    for it in range(2):  # fine grid, then again with weights from the better model's residuals
+        if it:
+            w = weights(tr[4] if tr[0] < v[0] else v[4])
+        v = _profile_fits(s, t, z, w, v[1] + fine, v[1] + fine, False) or v
+        g1, g2 = np.meshgrid(tr[1] + fine, tr[2] + fine, indexing="ij")
+        ok = (g2 - g1) >= wmin
+        tr = (_profile_fits(s, t, z, w, g1[ok], g2[ok], True) or tr) if ok.any() else tr
+    ne = float(w.sum())
+    if rms(tr) > max_rms or ne < 10:
+        return None
+    sig = max(sigma0, rms(tr))
+    for outer in (s <= -0.75 * lim, s >= 0.75 * lim):  # the outer quarters must not bend away (a fourth break)
+        if outer.sum() >= 3:
+            mo = float(np.median(tr[4][outer]))
+            if abs(mo) > max(0.5 * sig, 2.5 * sig / math.sqrt(outer.sum())):
+                return None
+    bic_v = ne * math.log(max(v[0], 1e-12) / ne) + 5.0 * math.log(ne)
+    bic_t = ne * math.log(max(tr[0], 1e-12) / ne) + 7.0 * math.log(ne)
+    if bic_t >= bic_v:
+        return None
+    x, k1 = tr[3], tr[1]
+    return (k1, tr[2], (float(x[2]), float(x[4]), float(x[3])), float(x[1]),
+            lambda k: x[0] + x[4] * (min(max(k, k1), tr[2]) - k1))  # the profile's height at t = 0
 
 
 def _intersect(pa, ca, pb, cb):
@@ -166,10 +263,11 @@ class _Vertex:
 class _Model:
     """Patch pairs on the ground points (local coordinates)."""
 
-    def __init__(self, xyz: np.ndarray, prm: dict[str, Any], sigma0: float, max_rms: float):
+    def __init__(self, xyz: np.ndarray, prm: dict[str, Any], sigma0: float, max_rms: float, spacing: float):
         from scipy.spatial import cKDTree
 
         self.xyz = xyz
+        self.spacing = spacing
         self.tree = cKDTree(xyz[:, :2])
         self.prm = prm
         self.sigma0 = sigma0
@@ -236,6 +334,75 @@ class _Model:
         un = un / np.linalg.norm(un)
         return _Vertex(p + s0 * nl, float(z0), un, math.sqrt(max(var_s, 0.0)), math.sqrt(max(var_z, 0.0)), ang,
                        nl_pts + nr_pts, float(s0))
+
+    def narrow_face(self, p: np.ndarray, u: np.ndarray) -> tuple[_Vertex, _Vertex] | None:
+        """A narrow face across the line at ``p`` (direction ``u``): the two edges of a ditch
+        bottom or a narrow crest that one patch pair models as a single V, or ``None``.
+
+        The profile across the line, in a window of half-width W, is fitted with robust weights
+        as a hinge (one break at knot k) and as a trapezoid (breaks at k1 < k2, a third face
+        between), both continuous and piecewise planar, z = a + c·t + piecewise-linear(s), the
+        knots on a coarse then a fine grid.  Like the patches, the window shrinks (from
+        gap + patch_width, by 0.8, to a quarter) until the trapezoid fits within ``max_rms``,
+        so that no fourth break lies in it; nothing is split where the hinge already fits
+        within ``max_rms``.  The trapezoid is taken when its BIC is lower, its middle face is
+        at least half a point spacing wide and every face holds ``min_points``, and it meets
+        both outer faces at ``min_angle`` or more.  Each edge is then the intersection of its
+        two faces fitted as planes (σ and angle as for any pair)."""
+        prm = self.prm
+        big = prm["gap"] + prm["patch_width"]
+        idx = self.tree.query_ball_point(p, math.hypot(prm["patch_length"] / 2.0, big))
+        if len(idx) < 3 * prm["min_points"]:
+            return None
+        q = self.xyz[idx]
+        nl = np.array([-u[1], u[0]])
+        d = q[:, :2] - p
+        t0, s0_all = d @ u, d @ nl
+        along = np.abs(t0) <= prm["patch_length"] / 2.0
+        wmin = max(0.5 * self.spacing, 2.0 * prm["gap"])
+        coarse = 0.4 * self.spacing
+        f = np.linspace(-coarse, coarse, 11)
+        for wk in range(7):
+            half_w = prm["gap"] + prm["patch_width"] * 0.8 ** wk
+            m = along & (np.abs(s0_all) <= half_w)
+            if m.sum() < 3 * prm["min_points"]:
+                return None
+            fit = _trapezoid(s0_all[m], t0[m], q[m, 2], half_w - 0.5 * self.spacing, coarse, f, wmin,
+                             self.sigma0, self.max_rms)
+            if fit is None:
+                continue  # a fourth break in the window: narrower
+            if fit is False:
+                return None  # the hinge fits: one break, no third face
+            s, t, z = s0_all[m], t0[m], q[m, 2]
+            break
+        else:
+            return None
+        k1, k2, slopes, c, z_at = fit
+        if any(math.degrees(abs(math.atan(slopes[i]) - math.atan(slopes[i + 1]))) < prm["min_angle"] for i in (0, 1)):
+            return None
+        band = min(prm["gap"], 0.25 * (k2 - k1))  # the points at a knot belong to either face: left out
+        faces = (s < k1 - band, (s > k1 + band) & (s < k2 - band), s > k2 + band)
+        planes = []
+        for face in faces:
+            if face.sum() < prm["min_points"]:
+                return None
+            pf = _robust_plane(s[face], t[face], z[face], self.sigma0)
+            if pf is None:
+                return None
+            planes.append(pf)
+        out = []
+        for a, b, k, (b1, b2) in ((planes[0], planes[1], k1, slopes[:2]), (planes[1], planes[2], k2, slopes[1:])):
+            x = _intersect(a[0], a[1], b[0], b[1])
+            if x is None:
+                return None
+            _, _, _, var_s, var_z, _ = x  # σ from the two faces fitted apart (each face's own points)
+            n1, n2 = np.array([-b1, -c, 1.0]), np.array([-b2, -c, 1.0])
+            ang = math.degrees(math.acos(min(1.0, float(n1 @ n2) / float(np.linalg.norm(n1) * np.linalg.norm(n2)))))
+            if ang < prm["min_angle"]:
+                return None
+            out.append(_Vertex(p + k * nl, float(z_at(k)), u.copy(), math.sqrt(max(var_s, 0.0)),
+                               math.sqrt(max(var_z, 0.0)), ang, int(len(z)), float(k)))
+        return out[0], out[1]
 
     def settle(self, p: np.ndarray, u: np.ndarray, rounds: int = 4) -> _Vertex | None:
         """Move the patch pair onto the line: intersect, recentre, repeat."""
@@ -309,6 +476,51 @@ def _near_lines(lines: list[np.ndarray], pts: np.ndarray, dist: float) -> np.nda
         if len(box):
             near[box[point_polyline_distance(p3[box], v) <= dist]] = True
     return near
+
+
+def _split_narrow(parts: list[dict], model: _Model) -> tuple[list[dict], int]:
+    """Replace the runs of vertices where a part is a V over a narrow face (a ditch bottom, a
+    narrow crest: :meth:`_Model.narrow_face`) by that face's two edges.  A vertex's decision
+    follows the majority of it and its two neighbours; runs of at least two split vertices
+    become two parts of the same form, the rest stays.  Returns the parts and the number of
+    vertices split."""
+    out: list[dict] = []
+    n_split = 0
+    for pt in parts:
+        v = pt["v"]
+        if len(v) < 2:
+            out.append(pt)
+            continue
+        xy = v[:, :2]
+        fwd = np.diff(xy, axis=0)
+        dirs = np.vstack([fwd[:1], fwd[:-1] + fwd[1:], fwd[-1:]]) if len(v) > 2 else np.vstack([fwd, fwd])
+        dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-12)
+        edges = [model.narrow_face(xy[i], dirs[i]) for i in range(len(v))]
+        flag = np.array([e is not None for e in edges])
+        if not flag.any():
+            out.append(pt)
+            continue
+        vote = flag.astype(int) + np.r_[flag[1:], flag[-1]] + np.r_[flag[0], flag[:-1]]
+        flag = (vote >= 2) & np.array([e is not None for e in edges])
+        per = pt["support"] / len(v)
+        k = 0
+        while k < len(v):
+            j = k
+            while j + 1 < len(v) and flag[j + 1] == flag[k]:
+                j += 1
+            run = np.arange(k, j + 1)
+            if flag[k] and len(run) >= 2:
+                n_split += len(run)
+                for side in (0, 1):
+                    vs = [edges[i][side] for i in run]
+                    out.append({"form": pt["form"], "v": np.array([[*e.xy, e.z] for e in vs]),
+                                "sxy": np.array([e.sigma_xy for e in vs]), "sz": np.array([e.sigma_z for e in vs]),
+                                "ang": np.array([e.angle for e in vs]), "support": int(sum(e.support for e in vs))})
+            elif not flag[k]:
+                out.append({"form": pt["form"], **{key: pt[key][run] for key in ("v", "sxy", "sz", "ang")},
+                            "support": int(per * len(run))})
+            k = j + 1
+    return out, n_split
 
 
 def _join(parts: list[dict], join: float) -> list[dict]:
@@ -481,7 +693,7 @@ def extract_breaklines(
     t2 = time.perf_counter()
 
     # 3. start points
-    model = _Model(g, prm, 0.5 * sigma0 if sigma0 > 0 else 0.01, max_rms)
+    model = _Model(g, prm, 0.5 * sigma0 if sigma0 > 0 else 0.01, max_rms, spacing)
     from scipy.spatial import cKDTree
 
     seeds: list[tuple[int, np.ndarray, np.ndarray]] = []  # (form, xy, u)
@@ -560,6 +772,7 @@ def extract_breaklines(
     t4 = time.perf_counter()
 
     # 6. post-processing
+    parts, n_split = _split_narrow(parts, model)
     parts = _join(parts, join)
     parts = _drop_shadowed(parts, consume)
     lines: list[Polyline] = []
@@ -589,6 +802,7 @@ def extract_breaklines(
         "start_points": int(start_mask.sum()) if approx is None else 0,
         "seeds_tried": tried,
         "parts": len(parts),
+        "narrow_face_vertices": n_split,
         "lines": len(lines),
         "total_length": float(sum(ln.length_2d for ln in lines)),
         "seconds": {"ground": round(t1 - t0, 3), "curvature": round(t2 - t1, 3), "start": round(t3 - t2, 3),

@@ -513,7 +513,7 @@ def colour_picture(
 
     meta = cloud.meta.get("colour") if key else None
     by = meta.get("by") if isinstance(meta, dict) else None
-    side = by == "morphology" or (by not in (None, "set", "class"))
+    side = key_panel(meta)
     w = 8.0
     h = max(2.5, min(w * nv / nu, 1.3 * w)) + 0.6
     if side:
@@ -542,6 +542,26 @@ def colour_picture(
     look = pr.get("look_azimuth")
     seen = "seen from above" if look is None else f"looking towards {look:.0f}°"
     ax.set_title(f"{title}\n{seen}" if title else seen, fontsize=9)
+    picture_key(fig, ax, kx, meta)
+    return _save(fig, path, dpi)
+
+
+def key_panel(meta) -> bool:
+    """True when the key of colours made with ``meta`` (``cloud.meta["colour"]``) needs a panel of
+    its own beside the picture (the morphology disc, a colour bar); sets and classes get a legend."""
+    by = meta.get("by") if isinstance(meta, dict) else None
+    return by == "morphology" or by not in (None, "set", "class")
+
+
+def picture_key(fig, ax, kx, meta, label: str | None = None) -> None:
+    """The key of a picture ``ax`` of points coloured by :func:`colour_cloud` (its
+    ``meta["colour"]``): the aspect/slope disc or a colour bar in the panel ``kx`` (see
+    :func:`key_panel`; a colour bar goes beside ``ax`` when ``kx`` is None), or the sets /
+    classes with their points as a legend beside ``ax``.
+    ``label``: the colour bar's label (default: the attribute name)."""
+    import matplotlib.pyplot as plt
+
+    by = meta.get("by") if isinstance(meta, dict) else None
     if by == "morphology":
         _morphology_key(kx, float(meta.get("sun_azimuth", 315.0)), float(meta.get("sun_altitude", 45.0)))
     elif by in ("set", "class"):
@@ -561,6 +581,12 @@ def colour_picture(
 
         lo, hi = meta.get("range", [0.0, 1.0])
         sm = ScalarMappable(norm=Normalize(lo, hi), cmap=meta.get("cmap", "viridis"))
-        kx.set_axis_off()
-        fig.colorbar(sm, ax=kx, fraction=0.6, aspect=18).set_label(str(meta.get("attribute", by)), fontsize=8)
-    return _save(fig, path, dpi)
+        if kx is None:  # beside the picture, as high as it
+            from mpl_toolkits.axes_grid1 import make_axes_locatable
+
+            bar = fig.colorbar(sm, cax=make_axes_locatable(ax).append_axes("right", size=0.15, pad=0.12))
+        else:
+            kx.set_axis_off()
+            bar = fig.colorbar(sm, ax=kx, fraction=0.6, aspect=18)
+        bar.set_label(label or str(meta.get("attribute", by)), fontsize=8)
+        bar.ax.tick_params(labelsize=7)

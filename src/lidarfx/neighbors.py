@@ -28,7 +28,7 @@ import numpy as np
 
 from .errors import LidarfxError
 
-__all__ = ["NeighborIndex", "Grid", "default_cell_for_knn", "default_radius"]
+__all__ = ["NeighborIndex", "Grid", "default_cell_for_knn", "default_radius", "check_grid"]
 
 
 class Grid(NamedTuple):
@@ -423,6 +423,23 @@ def _sorted_local(xyz, origin, order):
     return pts
 
 
+MAX_GRID_CELLS = 2**62
+"""Most cells of a grid whose int64 cell key (``ix * ny + iy``, ``(ix * ny + iy) * nz + iz``) cannot overflow."""
+
+
+def check_grid(shape, cell: float, option: str = "radius", grid: str = "the index", unit: str = "columns") -> None:
+    """Refuse a grid of ``shape`` cells (counts per axis, ints or floats, ``inf`` included) of edge
+    ``cell`` when its int64 cell keys would overflow (Python ints do not), with the one-line error
+    "the OPTION is too small for the cloud's extent: GRID would need NX × NY UNIT of CELL"."""
+    total = 1.0
+    for v in shape:
+        total *= float(v)
+    if not total < MAX_GRID_CELLS:  # NaN too
+        dims = " × ".join(f"{v:.3g}" for v in shape)
+        raise LidarfxError(f"the {option} is too small for the cloud's extent: {grid} would need "
+                           f"{dims} {unit} of {cell:g}; use a larger {option}")
+
+
 def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
     """Sort the points into columns of ``cell`` (x, y made local by ``origin``), by z
     inside each column.  Returns the sorted local points, the order and the column
@@ -434,9 +451,7 @@ def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
         ny = int(math.floor((hi[1] - origin[1]) / cell)) + 1
     else:
         nx = ny = 1
-    if nx * ny >= 2**62:  # the int64 column key would overflow (Python ints do not)
-        raise LidarfxError(f"the radius is too small for the cloud's extent: the index would need "
-                           f"{nx:.3g} × {ny:.3g} columns of {cell:g}; use a larger radius")
+    check_grid((nx, ny), cell)
     key = _column_keys(xyz, origin, cell, ny)
     ncells = nx * ny
     dense = ncells <= 4 * n + 4096

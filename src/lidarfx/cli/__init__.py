@@ -13,7 +13,8 @@ import warnings
 from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
 COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
-                   "eigenclass", "edges", "powerlines", "discontinuities", "colour", "breaklines"]
+                   "eigenclass", "edges", "powerlines", "discontinuities", "colour", "breaklines", "thin", "section", "parts",
+                   "members"]
 
 EPILOG = """examples:
   lidarfx demo                                   # run the main job on the bundled sample
@@ -26,6 +27,10 @@ EPILOG = """examples:
   lidarfx discontinuities face.laz out/ --scanner 5,-25,1.5  # joint sets, stereonet, spacing, overhangs
   lidarfx breaklines als.laz lines.geojson --dxf lines.dxf   # dike crests and toes, ditch edges (3-D)
   lidarfx colour face.laz rgb.laz --picture face.png        # RGB: aspect hue, slope saturation, shading
+  lidarfx thin tower.laz tower_5cm.laz --cell 0.05          # one point per 5 cm cell, streamed
+  lidarfx section tower.laz cut.laz --from -4,0 --to 4,0 --width 0.2 --image cut.png --by z
+  lidarfx parts tower.laz out/                              # bolts, insulators, corona rings of a lattice tower
+  lidarfx members tower.laz members.geojson --dxf members.dxf   # tower members as 3-D lines
 """
 
 

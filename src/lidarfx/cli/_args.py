@@ -28,7 +28,8 @@ def xyz(text: str) -> list[float]:
     return vals
 
 
-NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation", "--reference-plane", "--range")
+NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation", "--reference-plane", "--range",
+                       "--from", "--to", "--normal")
 """Options whose value is a comma-separated list of numbers, which may start with a minus sign."""
 _NUMBER_LIST = re.compile(r"^-[0-9.][0-9.eE+\-]*(,[0-9.eE+\- ]*)+$")
 

@@ -33,7 +33,7 @@ from ..errors import LidarfxError
 from ..progress import bar as _bar
 from ..progress import wanted as _wanted
 
-__all__ = ["read", "write", "info", "accepts_columns", "FORMATS", "ASPRS_CLASSES", "progress_bar"]
+__all__ = ["read", "write", "info", "accepts_columns", "input_format", "FORMATS", "ASPRS_CLASSES", "progress_bar"]
 
 FORMATS: dict[str, str] = {
     ".las": "las",
@@ -113,6 +113,12 @@ def _input_module(path: Path):
     if not path.is_file():
         raise LidarfxError(f"not a file: {path}")
     return _format_module(path)
+
+
+def input_format(path: str | os.PathLike) -> str:
+    """Format module name (``"las"``, ``"ply"``, ``"ascii"``, ``"npy"``) of an existing input file;
+    a one-line error for a missing file, a folder or an unknown extension."""
+    return _input_module(Path(path)).__name__.rsplit(".", 1)[-1]
 
 
 def accepts_columns(path: str | os.PathLike) -> bool:

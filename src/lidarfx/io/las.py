@@ -47,6 +47,10 @@ __all__ = [
     "write",
     "read_header",
     "iter_chunks",
+    "iter_records",
+    "record_xyz",
+    "record_cloud",
+    "write_records",
     "crs_info",
     "header_info",
     "standard_dtypes",
@@ -131,6 +135,23 @@ def standard_dtypes() -> dict[str, np.dtype]:
 
 
 # ------------------------------------------------------------------ reading
+def _decode_xyz(raw: np.ndarray, header: LasHeader, out: np.ndarray) -> None:
+    """Scaled coordinates of raw point records into ``out`` (n, 3)."""
+    for i, c in enumerate(_COORDS):
+        # Same float operations as laspy's ScaledArrayView: X * scale + offset.
+        np.multiply(raw[c], header.scales[i], out=out[:, i])
+        out[:, i] += header.offsets[i]
+
+
+def record_xyz(rec: laspy.PackedPointRecord, header: LasHeader) -> np.ndarray:
+    """The (n, 3) float64 coordinates of a point record, exactly as :func:`read` gives them."""
+    xyz = np.empty((len(rec), 3), dtype=np.float64)
+    for b0 in range(0, len(rec), _BLOCK_POINTS):
+        sl = slice(b0, min(b0 + _BLOCK_POINTS, len(rec)))
+        _decode_xyz(rec.array[sl], header, xyz[sl])
+    return xyz
+
+
 def _decode(
     rec: laspy.PackedPointRecord,
     header: LasHeader,
@@ -142,10 +163,7 @@ def _decode(
     for b0 in range(0, len(rec), _BLOCK_POINTS):  # block-wise: strided reads stay in cache
         sl = slice(b0, min(b0 + _BLOCK_POINTS, len(rec)))
         block, raw = rec[sl], rec.array[sl]
-        for i, c in enumerate(_COORDS):
-            # Same float operations as laspy's ScaledArrayView: X * scale + offset.
-            np.multiply(raw[c], header.scales[i], out=xyz[sl, i])
-            xyz[sl, i] += header.offsets[i]
+        _decode_xyz(raw, header, xyz[sl])
         for f in fields:
             out = attrs[f.attr][sl]
             if f.dim.kind == _dims.DimensionKind.BitField:
@@ -178,15 +196,59 @@ def iter_chunks(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[PointC
     """
     with laspy.open(path) as reader:
         header = reader.header
-        fields = _fields(header.point_format)
         yielded = False
         for rec in reader.chunk_iterator(chunk_points):
-            xyz, attrs = _empty(len(rec), fields)
-            _decode(rec, header, fields, xyz, attrs)
             yielded = True
-            yield PointCloud(xyz, attrs, header=header)
+            yield record_cloud(rec, header)
         if not yielded:
-            yield PointCloud(*_empty(0, fields), header=header)
+            yield PointCloud(*_empty(0, _fields(header.point_format)), header=header)
+
+
+def record_cloud(rec: laspy.PackedPointRecord, header: LasHeader) -> PointCloud:
+    """A point record decoded into a :class:`PointCloud` (as :func:`read` decodes a file)."""
+    fields = _fields(header.point_format)
+    xyz, attrs = _empty(len(rec), fields)
+    _decode(rec, header, fields, xyz, attrs)
+    return PointCloud(xyz, attrs, header=header)
+
+
+def _check_size(path: Path, header: LasHeader) -> None:
+    """An uncompressed file shorter than its header's point count says: a one-line error."""
+    n = int(header.point_count)
+    if not header.are_points_compressed:
+        expected = header.offset_to_point_data + n * header.point_format.size
+        if path.stat().st_size < expected:
+            raise LidarfxError(
+                f"{path}: truncated: the header announces {n} points ({expected} bytes), "
+                f"the file has {path.stat().st_size} bytes"
+            )
+
+
+def iter_records(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[tuple[int, laspy.PackedPointRecord, LasHeader]]:
+    """Yield ``(start, record, header)``: the raw point records of a LAS/LAZ file in file order,
+    at most ``chunk_points`` at a time, ``start`` being the index of the chunk's first point.
+
+    Nothing is allocated from the header's point count; a file holding more or fewer points than
+    its header announces, or a damaged one, is a one-line :class:`LidarfxError` (after the last
+    chunk, for fewer points)."""
+    from . import _one_line
+
+    try:
+        with laspy.open(path) as reader:
+            header = reader.header
+            n = int(header.point_count)
+            _check_size(path, header)
+            done = 0
+            for rec in reader.chunk_iterator(chunk_points):
+                m = len(rec)
+                if done + m > n:
+                    raise LidarfxError(f"{path}: more points than the header's {n}")
+                yield done, rec, header
+                done += m
+    except READ_ERRORS as exc:
+        raise LidarfxError(f"cannot read {path}: {_one_line(exc)}") from exc
+    if done != n:
+        raise LidarfxError(f"{path}: header announces {n} points but the file holds {done} (truncated?)")
 
 
 def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
@@ -194,13 +256,7 @@ def read(path: Path, *, columns: list[str] | None = None, progress: bool | None 
     with laspy.open(path) as reader:
         header = reader.header
         n = int(header.point_count)
-        if not header.are_points_compressed:
-            expected = header.offset_to_point_data + n * header.point_format.size
-            if path.stat().st_size < expected:
-                raise LidarfxError(
-                    f"{path}: truncated: the header announces {n} points ({expected} bytes), "
-                    f"the file has {path.stat().st_size} bytes"
-                )
+        _check_size(path, header)
         fields = _fields(header.point_format)
         xyz, attrs = _empty(n, fields)
         done = 0
@@ -306,6 +362,22 @@ def _compatible_version(version: str, pf_id: int) -> str:
     raise LidarfxError(f"no LAS version >= {version} supports point format {pf_id}")
 
 
+def _writable_version(header: LasHeader, pf_id: int) -> str:
+    """The version to write a source header's points with: its own (1.0 as 1.1, which laspy
+    can write), raised when point format ``pf_id`` needs it."""
+    version = str(header.version)
+    if version == "1.0":
+        version = "1.1"
+    return _compatible_version(version, pf_id)
+
+
+def _drop_stale_vlrs(header: LasHeader) -> None:
+    """Remove (E)VLRs that would describe the wrong points after a rewrite (a COPC index)."""
+    for vlrs in (header.vlrs, header.evlrs or []):
+        # in place: assigning header.vlrs would rebuild the extra-bytes VLR
+        vlrs[:] = [v for v in vlrs if getattr(v, "user_id", "") not in _DROPPED_VLR_USER_IDS]
+
+
 def _fit_offsets(header: LasHeader, xyz: np.ndarray, keep: bool) -> None:
     """Keep the header's offsets when the coordinates fit int32 with them, else floor(min)."""
     if len(xyz) == 0:
@@ -364,10 +436,7 @@ def _target_header(cloud: PointCloud, point_format: int | None, scale: Any) -> L
         unchanged = pf_id == source.point_format.id and not new_dims and len(kept) == len(
             list(source.point_format.extra_dimensions)
         )
-        version = str(header.version)
-        if version == "1.0":
-            version = "1.1"
-        version = _compatible_version(version, pf_id)
+        version = _writable_version(header, pf_id)
         if unchanged:
             if version != str(header.version):
                 header.version = laspy.header.Version.from_str(version)
@@ -375,9 +444,7 @@ def _target_header(cloud: PointCloud, point_format: int | None, scale: Any) -> L
             header.set_version_and_point_format(
                 laspy.header.Version.from_str(version), _build_pf(pf_id, kept, new_dims)
             )
-        for vlrs in (header.vlrs, header.evlrs or []):
-            # in place: assigning header.vlrs would rebuild the extra-bytes VLR
-            vlrs[:] = [v for v in vlrs if getattr(v, "user_id", "") not in _DROPPED_VLR_USER_IDS]
+        _drop_stale_vlrs(header)
     else:
         header = LasHeader(version=DEFAULT_VERSION, point_format=_build_pf(pf_id, kept, new_dims))
         header.scales = np.full(3, DEFAULT_SCALE)
@@ -582,6 +649,39 @@ def write(
         stats.apply(writer.header)
         if header.version.minor >= 4 and header.evlrs:
             writer.write_evlrs(header.evlrs)
+
+
+def write_records(path: Path, header: LasHeader, chunks, *, ext: str = ".las") -> int:
+    """Write raw point records (in ``header``'s point format, scales and offsets, e.g. chunks of
+    :func:`iter_records`) as LAS (``ext == ".las"``) or LAZ (``".laz"``); returns the points written.
+
+    The records are copied bit for bit.  The header keeps its version (1.0 is written as 1.1),
+    point format, scales, offsets, VLRs and EVLRs (a COPC index is dropped); point counts, bounds
+    and the extra-bytes min/max describe the points written.  ``chunks`` is consumed once, so the
+    points never exist in full."""
+    out = header.copy()
+    pf = out.point_format
+    version = _writable_version(out, pf.id)
+    if version != str(out.version):
+        out.version = laspy.header.Version.from_str(version)
+    _drop_stale_vlrs(out)
+    stats = _ExtraBytesStats(out)
+    extra = [f for f in _fields(pf) if not f.dim.is_standard]
+    n = 0
+    with open(path, "wb") as fh, laspy.LasWriter(fh, out, do_compress=ext == ".laz", closefd=False) as writer:
+        stats.detach(writer.header)
+        for rec in chunks:
+            if not len(rec):
+                continue
+            raw = rec.array
+            for f in extra:
+                stats.update(f, raw[f.dim.name] if f.element is None else raw[f.dim.name][:, f.element])
+            writer.write_points(rec)
+            n += len(rec)
+        stats.apply(writer.header)
+        if out.version.minor >= 4 and out.evlrs:
+            writer.write_evlrs(out.evlrs)
+    return n
 
 
 # ---------------------------------------------------------------- summaries

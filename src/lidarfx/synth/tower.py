@@ -9,15 +9,18 @@ Frame: tower axis = z, base centre at the local origin, cross arms along ±x.
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Sequence
 
 import numpy as np
 
 from ._common import (
     Scene,
+    _count,
     add_noise,
     capture_params,
     check_count,
+    check_flag,
     check_length,
     check_nonneg,
     check_origin,
@@ -25,6 +28,7 @@ from ._common import (
     finish,
     make_rng,
     perpendicular_frame,
+    sample_cylinder_surface,
     sample_rect,
     unit,
 )
@@ -32,8 +36,30 @@ from ..errors import LidarfxError
 
 __all__ = ["PARTS", "lattice_members", "tower"]
 
-PARTS: dict[str, int] = {"leg": 0, "brace": 1, "arm": 2, "bolt": 3}
-"""Values of the ``part`` attribute."""
+PARTS: dict[str, int] = {"leg": 0, "brace": 1, "arm": 2, "bolt": 3, "insulator": 4, "corona_ring": 5}
+"""Values of the ``part`` attribute (``insulator`` and ``corona_ring`` only with ``insulators=True``)."""
+
+_LATTICE_PARTS = ("leg", "brace", "arm", "bolt")
+"""The parts of a tower without insulators (its truth lists only these)."""
+
+DISC_RADIUS = 0.1275
+"""Radius (m) of an insulator disc (a 255 mm cap-and-pin disc)."""
+DISC_PITCH = 0.146
+"""Spacing (m) of the discs along an insulator string."""
+CORE_RADIUS = 0.03
+"""Radius (m) of the caps and pins between the discs."""
+DISC_DROP = 0.03
+"""Height (m) of a disc's conical top from the core to the rim."""
+HANGER = 0.25
+"""Gap (m) between the arm tip and the top of the string (shackle and clevis, too thin to be sampled)."""
+RING_TUBE = 0.025
+"""Tube radius (m) of a corona ring."""
+RING_DROP = 0.12
+"""Height (m) of the string's lower end above the corona ring's centre (the yoke between them is not sampled)."""
+MAX_INSULATOR_LENGTH = 20.0
+"""Longest insulator string (m)."""
+MAX_RING_RADIUS = 2.0
+"""Largest corona-ring radius (m)."""
 
 DEFAULT_ARMS = (
     {"z_frac": 0.70, "left": 5.0, "right": 5.0, "depth": 1.6},
@@ -151,10 +177,13 @@ def tower(
     bolt_points: int = 40,
     bolt_radius: float = 0.012,
     bolt_height: float = 0.012,
+    insulators: bool = False,
+    insulator_length: float = 1.3,
+    ring_radius: float = 0.2,
     seed: int = 0,
     origin: Any = None,
 ):
-    """TLS-like lattice steel tower: angle-profile members plus bolt heads.
+    """TLS-like lattice steel tower: angle-profile members plus bolt heads (and insulators).
 
     Parameters
     ----------
@@ -170,6 +199,14 @@ def tower(
         At both ends of every brace, ``bolts_per_joint`` bolt heads (small
         cylinders with cap standing on the brace's flange) of ``bolt_points``
         points each: small dense clusters protruding from the local plane.
+    insulators, insulator_length, ring_radius:
+        With ``insulators``, a vertical string of discs hangs from every arm tip
+        (top :data:`HANGER` below the tip, ``insulator_length`` long: discs of
+        radius :data:`DISC_RADIUS` every :data:`DISC_PITCH` on a core of radius
+        :data:`CORE_RADIUS`) with a horizontal corona ring (torus of major radius
+        ``ring_radius``, tube :data:`RING_TUBE`) around its lower end, sampled
+        at ``density`` per m².  Without them the scene is exactly the one of
+        earlier versions (same points, attributes and truth for a seed).
     seed, origin:
         Random seed; shift added to all coordinates (truth stays local).
 
@@ -177,9 +214,12 @@ def tower(
     -------
     PointCloud
         Attributes ``member_id`` (−1 for bolts), ``part`` (:data:`PARTS`),
-        ``bolt_id`` (−1 for members).  ``meta["truth"]``: ``members`` (id,
-        part, start, end, width), ``bolts`` (id, centre, axis, member),
-        ``arm_tips``, ``scanners``.
+        ``bolt_id`` (−1 for members); with insulators also ``insulator_id``
+        (the string of an insulator or corona-ring point, −1 elsewhere).
+        ``meta["truth"]``: ``members`` (id, part, start, end, width), ``bolts``
+        (id, centre, axis, member), ``arm_tips``, ``scanners``; with insulators
+        ``insulators`` (id, tip, top, bottom, centre, axis, length, radius,
+        discs) and ``corona_rings`` (id, insulator, centre, normal, radius, tube).
     """
     params = capture_params(locals())
     density = check_positive("density", density)
@@ -188,11 +228,23 @@ def tower(
     bolt_points = check_count("bolt_points", bolt_points, 1)
     bolt_radius = check_length("bolt_radius", bolt_radius)
     bolt_height = check_length("bolt_height", bolt_height)
+    insulators = check_flag("insulators", insulators)
+    insulator_length = check_positive("insulator_length", insulator_length, MAX_INSULATOR_LENGTH)
+    ring_radius = check_positive("ring_radius", ring_radius, MAX_RING_RADIUS)
+    if not insulators:  # the truth of a tower without insulators is the one of earlier versions
+        for key in ("insulators", "insulator_length", "ring_radius"):
+            params.pop(key)
+    if insulators and ring_radius <= DISC_RADIUS + RING_TUBE:
+        raise LidarfxError(f"ring_radius must be larger than the disc radius plus the ring tube "
+                           f"({DISC_RADIUS + RING_TUBE:g} m), got {ring_radius!r}")
     origin = check_origin(origin)
     rng = make_rng(seed)
     members, tips = lattice_members(height, base_width, top_width, n_panels, arms)
 
-    scene = Scene({"member_id": (np.int32, -1), "part": (np.int32, -1), "bolt_id": (np.int32, -1)})
+    columns = {"member_id": (np.int32, -1), "part": (np.int32, -1), "bolt_id": (np.int32, -1)}
+    if insulators:
+        columns["insulator_id"] = (np.int32, -1)
+    scene = Scene(columns)
     bolts: list[dict[str, Any]] = []
     for m in members:
         pts, e1, e2 = _angle_profile(rng, m["start"], m["end"], m["width"], density)
@@ -215,20 +267,87 @@ def tower(
                 bolts.append({"id": len(bolts), "centre": centre, "axis": head_axis, "member": m["id"],
                               "radius": bolt_radius, "height": bolt_height})
 
+    strings: list[dict[str, Any]] = []
+    rings: list[dict[str, Any]] = []
+    if insulators:  # after every draw of the lattice: the scene without insulators stays the same
+        for tip in tips:
+            string, ring, pts_string, pts_ring = _insulator(rng, np.asarray(tip["xyz"], float), insulator_length,
+                                                            ring_radius, density)
+            string["id"] = ring["id"] = ring["insulator"] = len(strings)
+            scene.add(pts_string, part=PARTS["insulator"], insulator_id=string["id"])
+            scene.add(pts_ring, part=PARTS["corona_ring"], insulator_id=string["id"])
+            strings.append(string)
+            rings.append(ring)
+
     xyz, attrs = scene.arrays()
     xyz = add_noise(rng, xyz, noise)
     top = max(max(m["start"][2], m["end"][2]) for m in members)
+    parts = PARTS if insulators else {k: PARTS[k] for k in _LATTICE_PARTS}
     truth = {
-        "parts": PARTS,
+        "parts": parts,
         "members": members,
         "arm_tips": tips,
         "bolts": bolts,
         "height": height,
         "top": top,
         "scanners": [[-15.0, -15.0, 1.6], [15.0, -12.0, 1.6]],
-        "counts": {name: int(np.count_nonzero(attrs["part"] == code)) for name, code in PARTS.items()},
+        "counts": {name: int(np.count_nonzero(attrs["part"] == code)) for name, code in parts.items()},
     }
+    if insulators:
+        truth["insulators"] = strings
+        truth["corona_rings"] = rings
     return finish("tower", xyz, attrs, truth, params, origin)
+
+
+def _insulator(rng, tip: np.ndarray, length: float, ring_radius: float, density: float):
+    """A vertical string of discs hanging from ``tip`` and its corona ring: truth records and points.
+
+    Discs (every :data:`DISC_PITCH`, the first half a pitch below the top): a
+    conical top from the core to the rim, :data:`DISC_DROP` high, and a flat
+    underside at the rim's level; the core (caps and pins) is a cylinder of
+    :data:`CORE_RADIUS` over the whole length.  The ring is a horizontal torus
+    :data:`RING_DROP` below the string's lower end.
+    """
+    down = np.array([0.0, 0.0, -1.0])
+    top = tip + HANGER * down
+    bottom = top + length * down
+    n_discs = max(1, int(math.floor(length / DISC_PITCH)))
+    pts = [sample_cylinder_surface(rng, bottom, -down, CORE_RADIUS, length, density)]
+    for k in range(n_discs):
+        rim = top + (0.5 + k) * (length / n_discs) * down
+        pts.append(_disc(rng, rim, CORE_RADIUS, DISC_RADIUS, DISC_DROP, density))  # conical top
+        pts.append(_disc(rng, rim, CORE_RADIUS, DISC_RADIUS, 0.0, density))  # flat underside
+    centre = bottom + RING_DROP * down
+    ring_pts = _torus(rng, centre, ring_radius, RING_TUBE, density)
+    string = {"tip": tip, "top": top, "bottom": bottom, "centre": 0.5 * (top + bottom), "axis": down,
+              "length": length, "radius": DISC_RADIUS, "discs": n_discs}
+    ring = {"centre": centre, "normal": np.array([0.0, 0.0, 1.0]), "radius": ring_radius, "tube": RING_TUBE}
+    return string, ring, np.vstack(pts), ring_pts
+
+
+def _disc(rng, rim_centre: np.ndarray, r_in: float, r_out: float, drop: float, density: float) -> np.ndarray:
+    """A horizontal annulus ``r_in``..``r_out`` around ``rim_centre`` (area-uniform), raised
+    by ``drop`` at ``r_in`` and falling linearly to the rim: a cone (``drop`` > 0) or flat."""
+    slant = math.hypot(r_out - r_in, drop) / (r_out - r_in)
+    n = _count(math.pi * (r_out**2 - r_in**2) * slant, density)
+    r = np.sqrt(rng.uniform(r_in**2, r_out**2, n))
+    phi = rng.uniform(0.0, 2 * math.pi, n)
+    z = drop * (r_out - r) / (r_out - r_in)
+    return rim_centre + np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def _torus(rng, centre: np.ndarray, major: float, minor: float, density: float) -> np.ndarray:
+    """Area-uniform points on a horizontal torus (rejection on the tube angle)."""
+    n = _count(4 * math.pi**2 * major * minor, density)
+    theta = np.empty(0)
+    while len(theta) < n:
+        t = rng.uniform(0.0, 2 * math.pi, 2 * (n - len(theta)) + 8)
+        keep = rng.uniform(size=len(t)) * (major + minor) < major + minor * np.cos(t)
+        theta = np.concatenate([theta, t[keep]])
+    theta = theta[:n]
+    phi = rng.uniform(0.0, 2 * math.pi, n)
+    rho = major + minor * np.cos(theta)
+    return centre + np.column_stack([rho * np.cos(phi), rho * np.sin(phi), minor * np.sin(theta)])
 
 
 def _bolt(rng, centre: np.ndarray, axis: np.ndarray, radius: float, height: float, n: int) -> np.ndarray:
