@@ -52,6 +52,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
+import numba as nb
 import numpy as np
 
 from .cloud import PointCloud
@@ -95,17 +96,82 @@ class Breaklines:
 
 
 # --------------------------------------------------------------------------- robust patch planes
+@nb.njit(cache=True)
 def _kp_weights(r: np.ndarray, sig: float) -> np.ndarray:
     """Kraus–Pfeifer-style weights of residuals ``r`` (z − surface): 1 within ±2σ; above
     1/(1 + ((r − 2σ)/σ)⁴), 0 beyond 6σ (off-terrain points); below
     1/(1 + ((|r| − 3σ)/(2σ))²) (the other side of a nearby break)."""
     w = np.ones(len(r))
-    up = r > 2.0 * sig
-    w[up] = 1.0 / (1.0 + ((r[up] - 2.0 * sig) / sig) ** 4)
-    w[r > 6.0 * sig] = 0.0
-    dn = r < -3.0 * sig
-    w[dn] = 1.0 / (1.0 + ((-r[dn] - 3.0 * sig) / (2.0 * sig)) ** 2)
+    for i in range(len(r)):
+        ri = r[i]
+        if ri > 6.0 * sig:
+            w[i] = 0.0
+        elif ri > 2.0 * sig:
+            x = (ri - 2.0 * sig) / sig
+            w[i] = 1.0 / (1.0 + x ** 4)
+        elif ri < -3.0 * sig:
+            x = (-ri - 3.0 * sig) / (2.0 * sig)
+            w[i] = 1.0 / (1.0 + x * x)
     return w
+
+
+@nb.njit(cache=True)
+def _normal3(s, t, z, w):
+    """Weighted normal equations of z = a + b·s + c·t."""
+    n = np.zeros((3, 3))
+    b = np.zeros(3)
+    for i in range(len(z)):
+        wi, si, ti = w[i], s[i], t[i]
+        n[0, 0] += wi
+        n[0, 1] += wi * si
+        n[0, 2] += wi * ti
+        n[1, 1] += wi * si * si
+        n[1, 2] += wi * si * ti
+        n[2, 2] += wi * ti * ti
+        b[0] += wi * z[i]
+        b[1] += wi * si * z[i]
+        b[2] += wi * ti * z[i]
+    n[1, 0], n[2, 0], n[2, 1] = n[0, 1], n[0, 2], n[1, 2]
+    return n, b
+
+
+@nb.njit(cache=True)
+def _robust_plane_kernel(s, t, z, sigma0, iterations):
+    """The adjustment of :func:`_robust_plane`; ``ok`` False where it has no answer."""
+    nz = len(z)
+    w = np.ones(nz)
+    r = np.empty(nz)
+    p = np.zeros(3)
+    cov = np.zeros((3, 3))
+    sig = sigma0
+    if iterations < 1 or nz < 3:
+        return False, p, cov, np.inf, 0.0, 0.0
+    for _ in range(iterations):
+        n, b = _normal3(s, t, z, w)
+        if np.linalg.cond(n) > 1e10:
+            return False, p, cov, np.inf, 0.0, 0.0
+        p = np.linalg.solve(n, b)
+        for i in range(nz):
+            r[i] = z[i] - (p[0] + p[1] * s[i] + p[2] * t[i])
+        med = np.median(r)
+        sig = max(sigma0, 1.4826 * np.median(np.abs(r - med)))
+        w = _kp_weights(r, sig)
+    n, b = _normal3(s, t, z, w)
+    ne = w.sum()
+    if ne < 3 or np.linalg.cond(n) > 1e10:
+        return False, p, cov, np.inf, ne, 0.0
+    wrr = 0.0
+    kept_ss = 0.0
+    kept = 0
+    for i in range(nz):
+        wrr += w[i] * r[i] * r[i]
+        if r[i] <= 3.0 * sig:  # all but the points above the plane (vegetation): a bent patch shows here
+            kept_ss += r[i] * r[i]
+            kept += 1
+    s0 = max(np.sqrt(wrr / max(ne - 3.0, 1.0)), 1e-6)
+    cov = np.linalg.inv(n) * s0 * s0
+    rms = np.sqrt(kept_ss / kept) if kept else np.inf
+    return True, p, cov, rms, ne, 1.0 - kept / nz
 
 
 def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, iterations: int = 6):
@@ -115,33 +181,116 @@ def _robust_plane(s: np.ndarray, t: np.ndarray, z: np.ndarray, sigma0: float, it
     1.4826 × the median absolute deviation of the residuals, at least ``sigma0``.  Returns ``(params, cov, rms,
     n_effective, share_above)`` or ``None``: ``rms`` over the points not more than 3σ
     above the plane, ``share_above`` the share of those left out."""
-    a = np.column_stack([np.ones_like(s), s, t])
-    w = np.ones(len(z))
-    sig = sigma0
-    p = None
-    for _ in range(iterations):
-        aw = a * w[:, None]
-        n = aw.T @ a
-        if np.linalg.cond(n) > 1e10:
-            return None
-        p = np.linalg.solve(n, aw.T @ z)
-        r = z - a @ p
-        sig = max(sigma0, 1.4826 * float(np.median(np.abs(r - np.median(r)))))
-        w = _kp_weights(r, sig)
-    if p is None:
-        return None
-    aw = a * w[:, None]
-    n = aw.T @ a
-    ne = float(w.sum())
-    if ne < 3 or np.linalg.cond(n) > 1e10:
-        return None
-    r = z - a @ p
-    dof = max(ne - 3.0, 1.0)
-    s0 = math.sqrt(float((w * r * r).sum()) / dof)
-    cov = np.linalg.inv(n) * max(s0, 1e-6) ** 2
-    kept = r <= 3.0 * sig  # all but the points above the plane (vegetation): a bent patch shows here
-    rms = math.sqrt(float((r[kept] ** 2).mean())) if kept.any() else math.inf
-    return p, cov, rms, ne, 1.0 - float(kept.mean())
+    f64 = np.float64
+    ok, p, cov, rms, ne, above = _robust_plane_kernel(np.ascontiguousarray(s, f64), np.ascontiguousarray(t, f64),
+                                                      np.ascontiguousarray(z, f64), float(sigma0), int(iterations))
+    return (p, cov, float(rms), float(ne), float(above)) if ok else None
+
+
+@nb.njit(cache=True)
+def _solve_small(a, b):
+    """Solve a·x = b (a small, symmetric positive definite) by Gaussian elimination with
+    partial pivoting, in place; ``ok`` False on a vanishing pivot."""
+    m = len(b)
+    for c in range(m):
+        piv = c
+        for r_ in range(c + 1, m):
+            if abs(a[r_, c]) > abs(a[piv, c]):
+                piv = r_
+        if abs(a[piv, c]) < 1e-300:
+            return False, b
+        if piv != c:
+            for k in range(m):
+                a[c, k], a[piv, k] = a[piv, k], a[c, k]
+            b[c], b[piv] = b[piv], b[c]
+        for r_ in range(c + 1, m):
+            f = a[r_, c] / a[c, c]
+            for k in range(c, m):
+                a[r_, k] -= f * a[c, k]
+            b[r_] -= f * b[c]
+    x = np.zeros(m)
+    for c in range(m - 1, -1, -1):
+        acc = b[c]
+        for k in range(c + 1, m):
+            acc -= a[c, k] * x[k]
+        x[c] = acc / a[c, c]
+    return True, x
+
+
+@nb.njit(cache=True)
+def _profile_kernel(s, t, z, w, k1, k2, middle):
+    """Best knot pair of :func:`_profile_fits`: index (−1: none), parameters, residuals.
+
+    The normal equations of every knot pair come from prefix sums over the points sorted by
+    s (left of k1, between, right of k2 are runs of the sorted order): O(1) per pair."""
+    n = len(s)
+    order = np.argsort(s)
+    ss = s[order]
+    pre = np.zeros((n + 1, 9))  # w, ws, wt, wss, wst, wtt, wz, wsz, wtz
+    for i in range(n):
+        j = order[i]
+        wi, si, ti, zi = w[j], s[j], t[j], z[j]
+        v = (wi, wi * si, wi * ti, wi * si * si, wi * si * ti, wi * ti * ti, wi * zi, wi * si * zi, wi * ti * zi)
+        for c in range(9):
+            pre[i + 1, c] = pre[i, c] + v[c]
+    wzz = 0.0
+    for i in range(n):
+        wzz += w[i] * z[i] * z[i]
+    m = 5 if middle else 4
+    tot = pre[n]
+    best, best_rss = -1, np.inf
+    best_x = np.zeros(m)
+    a = np.zeros((m, m))
+    b = np.zeros(m)
+    for j in range(len(k1)):
+        ka, kc = k1[j], k2[j]
+        il = np.searchsorted(ss, ka, "left")  # s < k1: [0, il)
+        ir = np.searchsorted(ss, kc, "right")  # s > k2: [ir, n)
+        left = pre[il]
+        mid = pre[ir] - pre[il]
+        right = tot - pre[ir]
+        a[:] = 0.0
+        a[0, 0], a[0, 1], a[1, 1] = tot[0], tot[2], tot[5]
+        a[0, 2] = left[1] - ka * left[0]
+        a[1, 2] = left[4] - ka * left[2]
+        a[2, 2] = left[3] - 2.0 * ka * left[1] + ka * ka * left[0]
+        a[0, 3] = right[1] - kc * right[0]
+        a[1, 3] = right[4] - kc * right[2]
+        a[3, 3] = right[3] - 2.0 * kc * right[1] + kc * kc * right[0]
+        b[0], b[1] = tot[6], tot[8]
+        b[2] = left[7] - ka * left[6]
+        b[3] = right[7] - kc * right[6]
+        if middle:
+            d = kc - ka
+            a[0, 4] = mid[1] - ka * mid[0] + d * right[0]
+            a[1, 4] = mid[4] - ka * mid[2] + d * right[2]
+            a[3, 4] = d * (right[1] - kc * right[0])
+            a[4, 4] = mid[3] - 2.0 * ka * mid[1] + ka * ka * mid[0] + d * d * right[0]
+            b[4] = mid[7] - ka * mid[6] + d * right[6]
+        for r_ in range(m):
+            a[r_, r_] += 1e-9
+            for c in range(r_):
+                a[r_, c] = a[c, r_]
+        rhs = b.copy()
+        ok, x = _solve_small(a, rhs)
+        if not ok:
+            continue
+        rss = wzz
+        for c in range(m):
+            rss -= x[c] * b[c]
+        if rss < best_rss:
+            best, best_rss = j, rss
+            best_x[:] = x
+    res = np.empty(n)
+    if best >= 0:
+        ka, kc = k1[best], k2[best]
+        for i in range(n):
+            si = s[i]
+            f = best_x[0] + best_x[1] * t[i] + best_x[2] * min(si - ka, 0.0) + best_x[3] * max(si - kc, 0.0)
+            if middle:
+                f += best_x[4] * (min(max(si, ka), kc) - ka)
+            res[i] = z[i] - f
+    return best, best_x, res
 
 
 def _profile_fits(s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray, k1: np.ndarray, k2: np.ndarray,
@@ -150,23 +299,16 @@ def _profile_fits(s: np.ndarray, t: np.ndarray, z: np.ndarray, w: np.ndarray, k1
     z = a + c·t + b₁·min(s − k1, 0) + b₂·max(s − k2, 0) [+ b₃·(clip(s, k1, k2) − k1)], one per knot
     pair (``middle``: the trapezoid, else the hinge with k1 = k2).  Returns the best as
     ``(wrss, k1, k2, params, residuals)`` or ``None``."""
-    ss = s[None, :]
-    cols = [np.ones((len(k1), len(s))), np.broadcast_to(t, (len(k1), len(s))),
-            np.minimum(ss - k1[:, None], 0.0), np.maximum(ss - k2[:, None], 0.0)]
-    if middle:
-        cols.append(np.clip(ss, k1[:, None], k2[:, None]) - k1[:, None])
-    a = np.stack(cols, axis=2)
-    at = np.ascontiguousarray((a * w[None, :, None]).transpose(0, 2, 1))
-    n = at @ a + 1e-9 * np.eye(a.shape[2])
-    b = at @ z
-    try:
-        x = np.linalg.solve(n, b[:, :, None])[:, :, 0]
-    except np.linalg.LinAlgError:
+    f64 = np.float64
+    k1 = np.ascontiguousarray(k1, f64)
+    k2 = np.ascontiguousarray(k2, f64)
+    if len(k1) == 0:
         return None
-    rss = float(w @ (z * z)) - (x * b).sum(axis=1)  # weighted residual sum of squares of each fit
-    j = int(np.argmin(rss))
-    r = z - a[j] @ x[j]
-    return float(w @ (r * r)), float(k1[j]), float(k2[j]), x[j], r
+    j, x, r = _profile_kernel(np.ascontiguousarray(s, f64), np.ascontiguousarray(t, f64),
+                              np.ascontiguousarray(z, f64), np.ascontiguousarray(w, f64), k1, k2, bool(middle))
+    if j < 0:
+        return None
+    return float(w @ (r * r)), float(k1[j]), float(k2[j]), x, r
 
 
 def _trapezoid(s, t, z, lim, coarse, fine, wmin, sigma0, max_rms):

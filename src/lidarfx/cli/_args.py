@@ -17,15 +17,25 @@ def numbers(text: str, n: int, what: str = "value") -> list[float]:
     return vals
 
 
-def xyz(text: str) -> list[float]:
-    """argparse type for a position ``x,y,z`` (e.g. ``--scanner 12.5,-3.0,1.7``): finite numbers."""
-    try:
-        vals = numbers(text, 3, "a position x,y,z")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    if not all(math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"a position x,y,z must be finite numbers, got {text!r}")
-    return vals
+def finite_numbers(counts: tuple[int, ...], what: str):
+    """An argparse type: comma-separated finite numbers, as many as one of ``counts``
+    (``what`` names the value in the one-line error, e.g. "a position x,y[,z]")."""
+
+    def parse(text: str) -> list[float]:
+        n = len(text.split(","))
+        try:
+            vals = numbers(text, n if n in counts else counts[-1], what)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        if not all(math.isfinite(v) for v in vals):
+            raise argparse.ArgumentTypeError(f"{what} must be finite numbers, got {text!r}")
+        return vals
+
+    return parse
+
+
+xyz = finite_numbers((3,), "a position x,y,z")
+"""argparse type for a position ``x,y,z`` (e.g. ``--scanner 12.5,-3.0,1.7``): finite numbers."""
 
 
 NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation", "--reference-plane", "--range",
@@ -136,6 +146,56 @@ def check_picture_path(path: str) -> None:
     if Path(path).suffix.lower() != ".png":
         raise LidarfxError(f"picture {path}: pictures are PNG files; give a path ending in .png")
     check_output_folder(path)
+
+
+def add_line_outputs(p, what: str, picture: str, cloud: str) -> None:
+    """The outputs of a line product beside its GeoJSON (``what``: "lines", "members"):
+    ``--dxf``, ``--csv [CSV]`` (with the JSON of the vertices), ``--picture``, ``--cloud``;
+    checked by :func:`line_output_paths`."""
+    p.add_argument("--dxf", default=None, metavar="DXF", help=f"also write the {what} as DXF 3-D polylines")
+    p.add_argument("--csv", nargs="?", const="", default=None, metavar="CSV",
+                   help=f"also write the per-{what[:-1]} table (default path: OUTPUT with .csv) and its JSON with "
+                        "the vertices")
+    p.add_argument("--picture", default=None, metavar="PNG", help=picture)
+    p.add_argument("--cloud", default=None, metavar="OUT", help=cloud)
+
+
+def line_output_paths(args, what: str = "lines") -> dict:
+    """The paths of :func:`add_line_outputs`, checked before any work: ``geojson``, ``dxf``,
+    ``csv``, ``json`` (the CSV's vertices, ``.lines.json``), ``picture``, ``cloud`` (None when
+    not asked for); each with its extension, not the input, in an existing folder, all distinct."""
+    from pathlib import Path
+
+    from .._atomic import check_not_same_file, check_output_folder
+    from ..errors import LidarfxError
+    from ..io import check_output_path
+
+    out = Path(args.output)
+    if out.suffix.lower() not in (".geojson", ".json"):
+        raise LidarfxError(f"{args.output}: the {what} are GeoJSON; give a path ending in .geojson")
+    paths: dict = {"geojson": args.output, "dxf": args.dxf, "csv": None, "json": None,
+                   "picture": args.picture, "cloud": args.cloud}
+    if args.dxf is not None and Path(args.dxf).suffix.lower() != ".dxf":
+        raise LidarfxError(f"{args.dxf}: give a DXF path ending in .dxf")
+    if args.csv is not None:
+        csv = args.csv or str(out.with_suffix(".csv"))
+        if Path(csv).suffix.lower() != ".csv":
+            raise LidarfxError(f"{csv}: give a table path ending in .csv")
+        paths["csv"] = csv
+        paths["json"] = str(Path(csv).with_suffix(".lines.json"))
+    if args.picture:
+        check_picture_path(args.picture)
+    if args.cloud:
+        check_not_same_file(args.input, args.cloud)
+        check_output_path(args.cloud)
+    given = [str(Path(v).resolve()) for v in paths.values() if v]
+    if len(set(given)) < len(given):
+        raise LidarfxError("two outputs have the same path; give each output its own file")
+    for v in paths.values():
+        if v:
+            check_not_same_file(args.input, v)
+            check_output_folder(v)
+    return paths
 
 
 def emit_summary(args, summary: dict, printer) -> None:

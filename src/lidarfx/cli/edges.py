@@ -5,7 +5,7 @@ import argparse
 import time
 from pathlib import Path
 
-from ._args import add_columns, check_picture_path, emit_summary, columns_of
+from ._args import add_columns, add_line_outputs, columns_of, emit_summary, line_output_paths
 
 EPILOG = """examples:
   lidarfx edges roofs.laz lines.geojson                              # radius from the point spacing
@@ -38,11 +38,8 @@ def register(sub) -> None:
     p.add_argument("input", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.npz)")
     p.add_argument("output", help="lines as GeoJSON (.geojson or .json)")
     p.add_argument("-r", "--radius", type=float, default=None, help="radius of classification and refinement (default: from the point spacing)")
-    p.add_argument("--dxf", default=None, metavar="DXF", help="also write the lines as DXF 3-D polylines")
-    p.add_argument("--csv", nargs="?", const="", default=None, metavar="CSV",
-                   help="also write the per-line table (default path: OUTPUT with .csv) and its JSON with the vertices")
-    p.add_argument("--picture", default=None, metavar="PNG", help="also draw the lines over the points (plan view)")
-    p.add_argument("--cloud", default=None, metavar="OUT", help="also write the cloud with structure and edge_candidate")
+    add_line_outputs(p, "lines", picture="also draw the lines over the points (plan view)",
+                     cloud="also write the cloud with structure and edge_candidate")
     p.add_argument("--use-structure", action="store_true", help="use the input's structure attribute (from lidarfx eigenclass)")
     p.add_argument("--references", default="trained", help="references of the classification (see lidarfx eigenclass)")
     p.add_argument("--labels", default="plane_border,edge,corner", help="structure labels of the candidate points, default %(default)s")
@@ -62,46 +59,13 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _paths(args) -> dict[str, str | None]:
-    from .._atomic import check_not_same_file, check_output_folder
-    from ..errors import LidarfxError
-    from ..io import check_output_path
-
-    out = Path(args.output)
-    if out.suffix.lower() not in (".geojson", ".json"):
-        raise LidarfxError(f"{args.output}: the lines are GeoJSON; give a path ending in .geojson")
-    paths: dict[str, str | None] = {"geojson": args.output, "dxf": args.dxf, "csv": None, "json": None,
-                                    "picture": args.picture, "cloud": args.cloud}
-    if args.dxf is not None and Path(args.dxf).suffix.lower() != ".dxf":
-        raise LidarfxError(f"{args.dxf}: give a DXF path ending in .dxf")
-    if args.csv is not None:
-        csv = args.csv or str(out.with_suffix(".csv"))
-        if Path(csv).suffix.lower() != ".csv":
-            raise LidarfxError(f"{csv}: give a table path ending in .csv")
-        paths["csv"] = csv
-        paths["json"] = str(Path(csv).with_suffix(".lines.json"))
-    if args.picture:
-        check_picture_path(args.picture)
-    if args.cloud:
-        check_not_same_file(args.input, args.cloud)
-        check_output_path(args.cloud)
-    given = [str(Path(v).resolve()) for v in paths.values() if v]
-    if len(set(given)) < len(given):
-        raise LidarfxError("two outputs have the same path; give each output its own file")
-    for v in paths.values():
-        if v:
-            check_not_same_file(args.input, v)
-            check_output_folder(v)
-    return paths
-
-
 def run(args) -> int:
     from .. import io
     from ..edges import extract_edges
     from ..ground.dtm import cloud_crs
     from ..vector import export_lines
 
-    paths = _paths(args)
+    paths = line_output_paths(args, "lines")
     labels = [s.strip() for s in args.labels.split(",") if s.strip()]
     progress = False if args.quiet else None
     t0 = time.perf_counter()

@@ -5,7 +5,7 @@ import argparse
 import time
 from pathlib import Path
 
-from ._args import add_columns, check_picture_path, columns_of, emit_summary
+from ._args import add_columns, add_line_outputs, columns_of, emit_summary, line_output_paths
 
 EPILOG = """examples:
   lidarfx members tower.laz members.geojson
@@ -54,48 +54,12 @@ def register(sub) -> None:
     p.add_argument("--join", type=float, default=None,
                    help="how far a member reaches beyond its line points to grow and meet others (default: 4 x radius)")
     p.add_argument("--seed", type=int, default=0, help="seed of the RANSAC draws, default %(default)s")
-    p.add_argument("--dxf", default=None, metavar="DXF", help="also write the members as DXF 3-D polylines")
-    p.add_argument("--csv", nargs="?", const="", default=None, metavar="CSV",
-                   help="also write the per-member table (default path: OUTPUT with .csv) and its JSON with the vertices")
-    p.add_argument("--picture", default=None, metavar="PNG", help="also draw the members over the points")
-    p.add_argument("--cloud", default=None, metavar="OUT", help="also write the cloud with member_id and member_label")
+    add_line_outputs(p, "members", picture="also draw the members over the points",
+                     cloud="also write the cloud with member_id and member_label")
     add_columns(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
-
-
-def _paths(args) -> dict[str, str | None]:
-    from .._atomic import check_not_same_file, check_output_folder
-    from ..errors import LidarfxError
-    from ..io import check_output_path
-
-    out = Path(args.output)
-    if out.suffix.lower() not in (".geojson", ".json"):
-        raise LidarfxError(f"{args.output}: the members are GeoJSON; give a path ending in .geojson")
-    paths: dict[str, str | None] = {"geojson": args.output, "dxf": args.dxf, "csv": None, "json": None,
-                                    "picture": args.picture, "cloud": args.cloud}
-    if args.dxf is not None and Path(args.dxf).suffix.lower() != ".dxf":
-        raise LidarfxError(f"{args.dxf}: give a DXF path ending in .dxf")
-    if args.csv is not None:
-        csv = args.csv or str(out.with_suffix(".csv"))
-        if Path(csv).suffix.lower() != ".csv":
-            raise LidarfxError(f"{csv}: give a table path ending in .csv")
-        paths["csv"] = csv
-        paths["json"] = str(Path(csv).with_suffix(".lines.json"))
-    if args.picture:
-        check_picture_path(args.picture)
-    if args.cloud:
-        check_not_same_file(args.input, args.cloud)
-        check_output_path(args.cloud)
-    given = [str(Path(v).resolve()) for v in paths.values() if v]
-    if len(set(given)) < len(given):
-        raise LidarfxError("two outputs have the same path; give each output its own file")
-    for v in paths.values():
-        if v:
-            check_not_same_file(args.input, v)
-            check_output_folder(v)
-    return paths
 
 
 def run(args) -> int:
@@ -107,7 +71,7 @@ def run(args) -> int:
     given = {k: getattr(args, k) for k in ("radius", "threshold", "min_linearity", "max_angle", "min_points",
                                            "min_length", "link", "max_gap", "join", "seed") if getattr(args, k) is not None}
     prm = check_parameters(**given)
-    paths = _paths(args)
+    paths = line_output_paths(args, "members")
     progress = False if args.quiet else None
     t0 = time.perf_counter()
     cloud = io.read(args.input, columns=columns_of(args), progress=progress)

@@ -2,11 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 
-from ._args import add_columns, check_output, check_picture_path, columns_of, emit_summary, numbers
+from ._args import add_columns, check_output, check_picture_path, columns_of, emit_summary, finite_numbers
 
 EPILOG = """examples:
   lidarfx section tower.laz cut.laz --from 0,-5 --to 0,5 --width 0.2 --image cut.png
@@ -33,25 +32,8 @@ and only the points near the slab are kept.  docs/tower.md#section-projection.
 """
 
 
-def _position(text: str) -> list[float]:
-    n = len(text.split(","))
-    try:
-        vals = numbers(text, n if n in (2, 3) else 3, "a position x,y[,z]")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    if not all(math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"a position x,y[,z] must be finite numbers, got {text!r}")
-    return vals
-
-
-def _normal(text: str) -> list[float]:
-    try:
-        vals = numbers(text, 3, "a normal nx,ny,nz")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    if not all(math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"a normal nx,ny,nz must be finite numbers, got {text!r}")
-    return vals
+_position = finite_numbers((2, 3), "a position x,y[,z]")
+_normal = finite_numbers((3,), "a normal nx,ny,nz")
 
 
 def register(sub) -> None:
