@@ -136,7 +136,7 @@ def test_convert_laz_to_las_passes_header_through(tmp_path):
     [
         (["info", "{tmp}/missing.laz"], "file not found"),
         (["info", "{tmp}/missing.e57"], "file not found"),  # not "unknown extension": the file is missing
-        (["features", "{tmp}", "{tmp}/b.laz"], "is a folder, not a point-cloud file"),
+        (["features", "{tmp}", "{tmp}/b.laz", "-r", "1"], "no .las / .laz files in this folder"),  # a folder = tiles
         (["convert", "{tmp}/a.xyz", "{tmp}/b.las", "--ascii"], "--ascii applies to .ply output only"),
         (["convert", "{tmp}/a.xyz", "{tmp}/a.xyz"], "is the input file"),
         (["convert", "{tmp}/a.xyz", "{tmp}/nodir/b.las"], "output folder does not exist"),

@@ -128,6 +128,9 @@ class CloudSample:
 
     cloud: PointCloud
     index: np.ndarray | None = None
+    ids: np.ndarray | None = None
+    """Identity of each row for the per-point random draws of MSAC (default: ``index``); a
+    chunk of a larger cloud gives the whole cloud's (:mod:`lidarfx.tiles`)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.cloud, PointCloud):
@@ -265,7 +268,9 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         filter of :mod:`lidarfx.ground`, which never looks at the
         classification) or ``"class"`` (the cloud's class 2 points — only for
         clouds whose ground is already classified; in an evaluation on labelled
-        data it leaks the reference).
+        data it leaks the reference), or ``"attribute"`` (the cloud's own
+        ``height_above_ground`` attribute, e.g. from ``lidarfx ground --hag``:
+        what a chunked prediction needs, :mod:`lidarfx.tiles`).
     precomputed:
         Read the neighbourhood features from the cloud's attributes (e.g. a
         file written by ``lidarfx features -r 1 -r 2 -r 4``) instead of
@@ -302,8 +307,8 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
 
     # ------------------------------------------------------------------ sklearn API
     def _plan(self):
-        if self.ground not in ("smrf", "class"):
-            raise LidarfxError(f"ground must be 'smrf' or 'class', got {self.ground!r}")
+        if self.ground not in ("smrf", "class", "attribute"):
+            raise LidarfxError(f"ground must be 'smrf', 'class' or 'attribute', got {self.ground!r}")
         if self.hag_cap is not None and not (self.hag_cap > 0):
             raise LidarfxError(f"hag_cap must be a positive height in m or None, got {self.hag_cap!r}")
         if self.max_disc_points is not None and not (self.max_disc_points > 0):
@@ -416,7 +421,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         return cache[key]
 
     def _matrix(self, sample: "CloudSample", names, slots, point, rs, cache) -> np.ndarray:
-        from ..features.api import _new_index, feature_arrays
+        from ..features.api import feature_arrays, feature_index
         from ..features.registry import Request
 
         cloud, idx = sample.cloud, sample.index
@@ -456,7 +461,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     # chunks of this cloud; only the current cloud's is kept (a list of clouds comes cloud by cloud)
                     cache.pop("index", None)
                     nb_xyz = xyz if keep is None else xyz[keep]
-                    cache["index"] = (id(cloud), nb_xyz, _new_index(nb_xyz, self.neighbourhood, self.k, rs, req))
+                    cache["index"] = (id(cloud), nb_xyz, feature_index(nb_xyz, self.neighbourhood, self.k, rs, req))
                 _, nb_xyz, index = cache["index"]
                 if keep is None:
                     q_xyz = None if idx is None else xyz[idx]
@@ -470,7 +475,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     neighbourhood=self.neighbourhood,
                     k=self.k,
                     query_xyz=q_xyz,
-                    query_ids=idx,
+                    query_ids=idx if sample.ids is None else sample.ids,
                     scanner=None if self.scanner is None else np.asarray(self.scanner, dtype=np.float64) * unit,
                     hist_bins=int(self.hist_bins),
                     progress=self.progress,
@@ -710,11 +715,16 @@ def terrain_shear(cloud: PointCloud, seed: int = 0) -> PointCloud:
 
 
 def hag(cloud: PointCloud, ground: str = "smrf") -> np.ndarray:
-    """Height above ground of every point (float32); ground from SMRF or class 2."""
+    """Height above ground of every point (float32); ground from SMRF or class 2, or the
+    cloud's ``height_above_ground`` attribute (``ground="attribute"``)."""
     try:
         from ..ground import classify_ground, height_above_ground
     except ImportError as exc:  # pragma: no cover - the ground module ships with lidarfx
         raise LidarfxError(f"height_above_ground needs lidarfx.ground ({exc})") from None
+    if ground == "attribute":  # written before, e.g. by lidarfx ground --hag (also in chunks)
+        if "height_above_ground" not in cloud:
+            raise LidarfxError("ground='attribute' needs a height_above_ground attribute (lidarfx ground IN OUT --hag)")
+        return np.asarray(cloud["height_above_ground"], dtype=np.float32)
     if ground == "class":
         if "classification" not in cloud:
             raise LidarfxError("ground='class' needs a classification with class 2")

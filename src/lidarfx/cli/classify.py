@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import _json
 from ._args import add_columns, check_output, check_picture_path, columns_of, read_clouds, xyz
+from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 
 EPILOG = """examples:
   # train on labelled tiles (ground / vegetation 3+4+5 / building; other classes ignored)
@@ -60,7 +61,13 @@ PREDICT_EPILOG = """examples:
   lidarfx classify predict delivered.laz out.laz --model m.skops --ground class   # the file's class 2 is the ground
   lidarfx classify predict new.laz out.laz --model m.skops --picture classes.png  # + a plan-view class map
   lidarfx classify predict new.laz out.laz --model m.skops --probabilities  # + probability_ground, ... per point
-"""
+  # in chunks (a folder of tiles, or a large file): the height above ground from the input, no building rule
+  lidarfx ground tiles/ hag/ --hag
+  lidarfx classify predict hag/ out/ --model m.skops --ground attribute --min-building-area 0
+  lidarfx classify predict big.laz out.laz --model m.skops --ground attribute --min-building-area 0 \\
+      --chunk-size 200 --workers 4 --resume
+
+""" + TILE_HELP
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -176,9 +183,10 @@ def register(sub) -> None:
                          "probabilities (before the building rule)")
     pr.add_argument("--precomputed", action="store_true",
                     help="read the neighbourhood features from the input's attributes")
-    pr.add_argument("--ground", choices=["smrf", "class"], default=None,
+    pr.add_argument("--ground", choices=["smrf", "class", "attribute"], default=None,
                     help="ground surface for height_above_ground: 'class' = the input's class 2 (e.g. the data "
-                         "provider's ground classification) instead of the SMRF filter; default: the model's")
+                         "provider's ground classification) instead of the SMRF filter, 'attribute' = the input's "
+                         "height_above_ground attribute (lidarfx ground --hag; needed in chunks); default: the model's")
     pr.add_argument("--picture", default=None, metavar="PNG",
                     help="also write a plan-view map of the predicted classes (class of the highest point per cell)")
     pr.add_argument("--min-building-area", type=float, default=None, metavar="M2",
@@ -186,6 +194,7 @@ def register(sub) -> None:
     pr.add_argument("--max-multi-return-share", type=float, default=None, metavar="S",
                     help="see-through test of that rule (see 'classify train --help'); 1 = off; default: the model's")
     add_columns(pr)
+    add_tile_options(pr)
     _add_common(pr)
     pr.set_defaults(func=run_predict)
 
@@ -327,6 +336,8 @@ def run_predict(args) -> int:
     from .. import io
     from ..classify import load_model
 
+    if wants_tiles(args, "classify", by_size=False):  # its defaults (SMRF height, building rule) are not local
+        return _predict_tiles(args)
     check_output(args.input, args.output)
     if args.picture:
         check_picture_path(args.picture)
@@ -393,6 +404,30 @@ def run_predict(args) -> int:
     say(f"{len(out):,} points ({summary['predicted']:,} classified) -> {args.output}: "
         + ", ".join(f"class {c} {n:,}" for c, n in counts.items()) + f" ({t3 - t0:.1f} s)")
     return 0
+
+
+def _predict_tiles(args) -> int:
+    """``classify predict`` in chunks (lidarfx.tiles.proc_classes): the whole input's statistics
+    first (one or two reads), then the chunks."""
+    import warnings
+
+    from ..classify.model import DENSITY_WARN_RATIO
+    from ..errors import LidarfxError, LidarfxWarning
+    from ..tiles.proc_classes import _model, classify_options
+
+    if args.picture:
+        raise LidarfxError("--picture draws the whole cloud, not in chunks: leave it out or use --chunk-size 0")
+    opts = classify_options(args.model, inputs_of(args.input), ground=args.ground, precomputed=args.precomputed,
+                            confidence=args.confidence, probabilities=args.probabilities,
+                            min_building_area=args.min_building_area,
+                            max_multi_return_share=args.max_multi_return_share)
+    ref = _model(opts).training_density
+    d = opts.get("density")
+    if ref and d is not None and d < DENSITY_WARN_RATIO * ref:
+        warnings.warn(f"{args.input}: {d:.1f} points/m² is {d / ref:.0%} of the sparsest training file's {ref:.1f}; "
+                      "the model's neighbourhoods were learned on denser data and accuracy falls with density "
+                      "(train on data like this, or with --density-augment)", LidarfxWarning, stacklevel=2)
+    return run_tiles(args, "classify", opts)
 
 
 def _rule_overrides(model, args) -> None:

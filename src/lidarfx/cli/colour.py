@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_picture_path, emit_summary, numbers, read_input, xyz
+from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 
 EPILOG = """examples:
   lidarfx colour face.laz face_rgb.laz                          # morphology: hue aspect, saturation slope, value shading
@@ -15,6 +16,7 @@ EPILOG = """examples:
   lidarfx colour dtm.laz rgb.laz --by z --cmap terrain --range -5,120
   lidarfx colour joints.laz rgb.laz --by set --picture sets.png  # set_id of the discontinuities command
   lidarfx colour als.laz rgb.laz --by class --view top --picture classes.png
+  lidarfx colour tiles/ rgb/ -r 0.3 --chunk-size 100             # a folder of tiles, in chunks
 
 --by morphology (default), with the normal n flipped up (n_z >= 0):
   hue        = aspect / 360, aspect = atan2(n_x, n_y) mod 360 (clockwise from North)
@@ -27,7 +29,13 @@ Points without a normal are black.  --by ATTRIBUTE maps any numeric attribute
 grey); --by set colours set_id (-1 grey), --by class the ASPRS classification.
 OUT gets red/green/blue (uint16, 0-65535), every other attribute unchanged.
 docs/colour.md.
-"""
+
+In chunks, what the in-memory run takes from the whole cloud is settled first:
+--by ATTRIBUTE without --range reads the inputs once more for the exact 2-98 %
+range; --by morphology needs --radius unless the inputs carry normals; no
+--picture (it draws every point in memory).
+
+""" + TILE_HELP
 
 
 def register(sub) -> None:
@@ -58,6 +66,7 @@ def register(sub) -> None:
                    help="view of the picture: top, front (from the South), side (from the East) or auto "
                         "(along the smallest-variance axis), default %(default)s")
     add_columns(p)
+    add_tile_options(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -94,6 +103,14 @@ def run(args) -> int:
         from .._atomic import check_not_same_file
 
         check_not_same_file(args.input, args.picture)
+    if wants_tiles(args, "colour", by_size=by != "morphology" or args.radius is not None):
+        from ..tiles.proc_colour import colour_options
+
+        if args.picture:
+            raise LidarfxError("--picture draws every point in memory; leave it out in chunks, or use --chunk-size 0")
+        return run_tiles(args, "colour", colour_options(
+            inputs_of(args.input), by, radius=args.radius, scanner=args.scanner, sun_azimuth=args.sun_azimuth,
+            sun_altitude=args.sun_altitude, cmap=args.cmap, value_range=value_range))
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
     t1 = time.perf_counter()

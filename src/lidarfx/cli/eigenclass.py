@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_picture_path, emit_summary, read_input
+from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 
 EPILOG = """examples:
   lidarfx eigenclass roofs.laz roofs_struct.laz                 # radius from the point spacing
@@ -26,7 +27,12 @@ also written: structure_confidence (float32, 0-1) and structure_distance
 (float32, RMS distance to the nearest reference in its standard deviations).
 The references are signatures (e1, e2, e3, centroid offset) of synthetic ideal
 structures made with lidarfx's own neighbourhood code; docs/structures.md.
-"""
+
+  lidarfx eigenclass tiles/ out/ -r 1.5                        # a folder of tiles, in chunks
+  lidarfx eigenclass big.laz out.laz -r 1.5 --chunk-size 200 --workers 4 --resume
+(in chunks give -r: the default radius comes from the whole cloud's point spacing)
+
+""" + TILE_HELP
 
 REF_EPILOG = """examples:
   lidarfx eigenclass-references refs.json                 # the shipped references again (about a minute)
@@ -70,6 +76,7 @@ def register(sub) -> None:
     p.add_argument("--keep-signature", action="store_true", help="also write e1, e2, e3, centroid_offset, n_neighbours")
     p.add_argument("--picture", default=None, metavar="PNG", help="also draw a plan-view map of the labels")
     add_columns(p)
+    add_tile_options(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -109,6 +116,15 @@ def run(args) -> int:
     _check_min_neighbours(args.min_neighbours)
     refs, kind = resolve_references(args.references)  # a bad file is refused before reading the cloud
     refs.tables(kind, args.weighting)
+    if wants_tiles(args, "eigenclass", by_size=args.radius is not None):
+        from ..errors import LidarfxError
+        from ..tiles.proc_classes import eigenclass_options
+
+        if args.picture:
+            raise LidarfxError("--picture draws the whole cloud, not in chunks: leave it out or use --chunk-size 0")
+        return run_tiles(args, "eigenclass", eigenclass_options(
+            args.radius, args.references, args.weighting, args.reject, args.min_neighbours, args.keep_signature,
+            inputs=inputs_of(args.input)))
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
     t1 = time.perf_counter()

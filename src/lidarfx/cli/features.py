@@ -6,7 +6,8 @@ import sys
 import time
 
 from .. import _json
-from ._args import add_columns, read_input, xyz
+from ._args import add_columns, check_output, read_input, xyz
+from ._tiles import TILE_HELP, add_tile_options, run_tiles, wants_tiles
 
 EPILOG = """examples:
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
@@ -20,7 +21,11 @@ distribution, curvature, quadric, eigenvectors, count, echo, ground
 (height above the SMRF ground), all (without ground) — or single names
 (slope, planarity, ...).  Features are written as float32 extra-bytes
 dimensions (LAS/LAZ) or attributes (PLY, text, npz); NaN = not computable.
-"""
+
+  lidarfx features tiles/ out/ -r 0.5 --features eigen,plane,density       # a folder of tiles, in chunks
+  lidarfx features big.laz out.laz -r 0.5 --chunk-size 200 --workers 4 --resume
+
+""" + TILE_HELP
 
 
 def register(sub) -> None:
@@ -47,6 +52,7 @@ def register(sub) -> None:
     p.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
     p.add_argument("--seed", type=int, default=0, help="seed of the MSAC generator")
     add_columns(p)
+    add_tile_options(p)
     p.add_argument("--list", action="store_true", help="list feature groups and names, then exit")
     p.add_argument("--json", action="store_true", help="print a JSON summary (timings, NaN shares) on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
@@ -68,12 +74,20 @@ def run(args) -> int:
     from .. import io
     from ..features import stream_features
 
+    radii = args.radius or []
+    tiled = wants_tiles(args, "features")
+    if not tiled:
+        check_output(args.input, args.output)  # outputs are checked before anything else
+    if args.neighbourhood != "knn" and not radii:
+        raise LidarfxError("give a radius: -r 0.5 (repeat -r for several scales)")
+    if tiled:
+        return run_tiles(args, "features", {
+            "features": args.features, "radii": radii, "neighbourhood": args.neighbourhood, "k": args.k,
+            "scanner": args.scanner, "height": args.height, "convention": args.convention, "d_max": args.d_max,
+            "hist_bins": args.bins, "seed": args.seed})
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
     t1 = time.perf_counter()
-    radii = args.radius or []
-    if args.neighbourhood != "knn" and not radii:
-        raise LidarfxError("give a radius: -r 0.5 (repeat -r for several scales)")
     names, fill = stream_features(
         cloud,
         args.features,

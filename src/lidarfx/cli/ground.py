@@ -7,17 +7,27 @@ import time
 
 from .. import _json
 from ._args import add_columns, check_output, columns_of
+from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 
 GROUND_EPILOG = """examples:
   lidarfx ground in.laz out.laz                        # class 2 = ground, 1 = other (noise 7/18 kept)
   lidarfx ground in.laz out.laz --hag --dtm dtm.tif    # + height_above_ground attribute + 1 m DTM
   lidarfx ground in.laz out.laz --slope 0.2 --window 24 --json
+  lidarfx ground tiles/ out/ --hag                     # a folder of tiles, in chunks
+  lidarfx ground big.laz out.laz --hag --chunk-size 500 --workers 4 --resume
 
 Method: SMRF (Pingel, Clarke & McBride 2013) with one default parameter set
 tuned on the ISPRS filter-test samples (docs/ground.md).  Only last returns
 are used where return numbers exist; classes 7, 18 and 66 are ignored and keep
 their class.  Every other point is set to 2 (ground) or 1 (unclassified).
-"""
+
+In chunks the filter sees each chunk with a buffer (default: 4 x --window
+rounded up to 50 m, i.e. 100 m; in the input's coordinate units): the filter
+is not local, so a few points near chunk borders may get another class than
+in one in-memory run (docs/scaling.md); --dtm needs --chunk-size 0 (or
+lidarfx dtm on the output).
+
+""" + TILE_HELP
 
 EVAL_EPILOG = """examples:
   lidarfx ground-eval samp11-utm.laz --reference-class 2
@@ -105,6 +115,7 @@ def register(sub) -> None:
     p.add_argument("--dtm", default=None, metavar="RASTER", help="also write a DTM raster (.tif or .asc)")
     p.add_argument("-r", "--resolution", type=float, default=1.0, help="DTM cell (map units), default 1.0")
     add_columns(p)
+    add_tile_options(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
     p.set_defaults(func=run_ground)
@@ -164,8 +175,18 @@ def run_ground(args) -> int:
     )
     from ..ground.dtm import check_resolution
 
-    check_output(args.input, args.output)
     params = _params(args)
+    if wants_tiles(args, "ground"):
+        if args.dtm:
+            from ..errors import LidarfxError
+
+            raise LidarfxError("--dtm is not written in chunks: run lidarfx dtm on the output (its class 2 points), "
+                               "or use --chunk-size 0")
+        from ..tiles.proc_ground import ground_options
+
+        return run_tiles(args, "ground", ground_options(params, ignore_classes=args.ignore_classes, hag=args.hag,
+                                                        inputs=inputs_of(args.input)))
+    check_output(args.input, args.output)
     if args.dtm:
         _check_raster_path(args.dtm)
         check_resolution(args.resolution)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import _json
 from ._args import add_columns, check_picture_path, read_input, xyz
+from ._tiles import inputs_of
 
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
@@ -30,6 +31,11 @@ outputs: OUT with segment_id (int32, -1 = none, 0 = largest) and segment_size
 (id, size, centroid, normal, dip, dip direction, RMS, convex-hull area in the
 plane).  Follow up with e.g.
   lidarfx select seg.laz big.laz --where "segment_id >= 0 and segment_size > 500"
+
+chunks: segment does not run in chunks (docs/scaling.md): surface growing is not
+local (a plane grows across chunk borders; seeds, the size filter and the ids
+ordered by size are the whole cloud's).  Run it on one file; cut a large input
+to size first (lidarfx select).
 """
 
 
@@ -91,6 +97,11 @@ def run(args) -> int:
     # the library's checks, before reading the cloud
     _check_params(args.normal_radius, args.max_distance, args.growing_radius, args.max_angle, args.min_size,
                   args.min_width)
+    if isinstance(inputs_of(args.input), list) or Path(args.input).is_dir():
+        from ..errors import LidarfxError
+
+        raise LidarfxError("segment does not run in chunks: surface growing is not local (a plane grows across "
+                           "chunk borders; its seeds, size filter and ids are the whole cloud's); give one file")
     t0 = time.perf_counter()
     cloud, progress = read_input(args)
     t1 = time.perf_counter()

@@ -150,18 +150,22 @@ def _check_not_empty(xyz: np.ndarray) -> None:
         raise LidarfxError("the point cloud is empty")
 
 
-def _new_index(xyz: np.ndarray, neighbourhood: str, k: int | None, rs: list[float], req: Request) -> NeighborIndex:
+def feature_index(xyz: np.ndarray, neighbourhood: str, k: int | None, rs: list[float], req: Request, *,
+                  origin: np.ndarray | None = None, knn_cell: float | None = None) -> NeighborIndex:
     """The index a feature run needs: cells of the largest radius (kNN: sized for k).
 
     Vertical cylinders (density, height, histogram features; the cylinder
     neighbourhood) take half that cell: a cylinder walks whole columns, and a
     finer ring of columns holds fewer points outside the circle (10 % less
     feature time on the classification default over dense trees; spheres are
-    faster with the larger cell)."""
+    faster with the larger cell).  ``origin`` (default: the per-axis minimum of
+    ``xyz``) and ``knn_cell`` (default: from ``xyz``'s extent) let a chunk of a
+    larger cloud build the index the whole cloud would have: its features then
+    equal the whole cloud's bit for bit (:mod:`lidarfx.tiles`)."""
     if neighbourhood == "knn":
-        return NeighborIndex(xyz, default_cell_for_knn(xyz - xyz.min(0), k))
+        return NeighborIndex(xyz, knn_cell or default_cell_for_knn(xyz - xyz.min(0), k), origin)
     cylinder = req.need_cylinder or neighbourhood == "cylinder"
-    return NeighborIndex(xyz, rs[-1] / 2 if cylinder else rs[-1])
+    return NeighborIndex(xyz, rs[-1] / 2 if cylinder else rs[-1], origin)
 
 
 def feature_arrays(
@@ -202,7 +206,7 @@ def feature_arrays(
                   msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
     _check_not_empty(xyz)
     if index is None:
-        index = _new_index(xyz, neighbourhood, k, rs, req)
+        index = feature_index(xyz, neighbourhood, k, rs, req)
     g = index.grid
     # queries in grid order: consecutive queries share cached neighbours and
     # results are written sequentially; ``perm[i]`` is the output row of query i
@@ -424,7 +428,7 @@ def stream_features(
                   msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
     if req.slots:
         _check_not_empty(cloud.xyz)
-    index = _new_index(cloud.xyz, neighbourhood, k, rs, req) if req.slots else None
+    index = feature_index(cloud.xyz, neighbourhood, k, rs, req) if req.slots else None
     point = {name: _point_feature(name, cloud) for name in req.point}
     names = list(req.point)
     if req.slots:

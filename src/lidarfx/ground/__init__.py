@@ -121,6 +121,7 @@ def classify_ground(
     ignore_classes: Iterable[int] | None = IGNORE_CLASSES,
     units: str = "auto",
     progress: bool | None = None,
+    origin: Any = None,
 ) -> np.ndarray:
     """Ground mask of an ALS point cloud by SMRF (Pingel, Clarke & McBride 2013).
 
@@ -143,6 +144,10 @@ def classify_ground(
         ``"native"``: they are in coordinate units as given.
     progress:
         Progress bar: ``True``/``False``, or ``None`` for large clouds on a terminal.
+    origin:
+        ``None``: the filter's grid starts at the candidates' minimum x, y (and z).
+        An ``(x, y, z)`` point: the grid's cells are those of a grid that starts there
+        (a chunk of a larger cloud filtered with that cloud's origin, lidarfx.tiles).
 
     Returns
     -------
@@ -172,7 +177,17 @@ def classify_ground(
     if len(idx) == 0:
         return mask
     local = xyz[idx]  # a copy (fancy indexing), made local in place
-    local -= local.min(axis=0)
+    offset = (0, 0)
+    if origin is None:
+        local -= local.min(axis=0)
+    else:  # cells aligned to the origin's grid, (row, column) offset of this grid's first cell
+        o = np.asarray(origin, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(o)):
+            raise LidarfxError(f"origin must be a finite point (x, y, z), got {origin!r}")
+        k = np.floor((local[:, :2].min(axis=0) - o[:2]) / cell)
+        local -= o
+        local[:, :2] -= k * cell
+        offset = (int(k[1]), int(k[0]))
     ext = local.max(axis=0)
     cells = (ext[0] / cell + 1) * (ext[1] / cell + 1)
     if cells > MAX_CELLS:
@@ -183,7 +198,7 @@ def classify_ground(
     spec = GridSpec(local[:, :2], cell)
     radius = window_radius(window, cell, spec.nx, spec.ny)
     with _progress.bar("ground (SMRF)", radius, _progress.wanted(progress, len(idx))) as advance:
-        ground, _ = smrf(local, advance=advance, **params)
+        ground, _ = smrf(local, advance=advance, offset=offset, **params)
     mask[idx] = ground
     return mask
 

@@ -94,8 +94,13 @@ def _cell_jitter(i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a - 0.5, b - 0.5
 
 
-def inpaint(grid: np.ndarray, spec: GridSpec, *, all_known: bool = False) -> np.ndarray:
+def inpaint(grid: np.ndarray, spec: GridSpec, *, all_known: bool = False,
+            offset: tuple[int, int] = (0, 0)) -> np.ndarray:
     """Fill the NaN cells of ``grid`` by linear (TIN) interpolation of the known cells.
+
+    ``offset``: (row, column) of this grid's cell (0, 0) in a larger grid it is cut from (a
+    chunk of a tiled run): the jitter is that of the larger grid's cells, so that the same
+    cells triangulate alike in both.
 
     The known values sit at the cell centres, each moved by at most
     :data:`INPAINT_JITTER` / 2 cells (:func:`_cell_jitter`): a regular grid has
@@ -127,7 +132,7 @@ def inpaint(grid: np.ndarray, spec: GridSpec, *, all_known: bool = False) -> np.
         near[0, :] = near[-1, :] = near[:, 0] = near[:, -1] = True
         use = known & near
     ii, jj = np.nonzero(use)
-    di, dj = _cell_jitter(ii, jj)
+    di, dj = _cell_jitter(ii + int(offset[0]), jj + int(offset[1]))
     pts = np.column_stack([(jj + 0.5 + INPAINT_JITTER * dj) * spec.cell, (ii + 0.5 + INPAINT_JITTER * di) * spec.cell])
     out = grid.copy()
     mi, mj = np.nonzero(~known)

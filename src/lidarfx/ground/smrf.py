@@ -116,18 +116,19 @@ def provisional_dtm(
     edge_step: float = DEFAULTS["edge_step"],
     edge_share: float = DEFAULTS["edge_share"],
     advance: Callable[[int], None] | None = None,
+    offset: tuple[int, int] = (0, 0),
 ) -> SmrfSurface:
-    """Steps 1–4 of SMRF on local coordinates ``xyz`` (n×3)."""
+    """Steps 1–4 of SMRF on local coordinates ``xyz`` (n×3); ``offset``: see :func:`smrf`."""
     spec = GridSpec(xyz[:, :2], cell)
     i, j = cell_index(xyz[:, :2], spec)
     zmin, arg = min_surface(i, j, xyz[:, 2], spec)
     empty = ~np.isfinite(zmin)
-    zfill = inpaint(zmin, spec)
+    zfill = inpaint(zmin, spec, offset=offset)
     low = progressive_objects(-zfill, cell, LOW_OUTLIER_SLOPE, LOW_OUTLIER_RADIUS) & ~empty
     if low.any():
         z2 = zmin.copy()
         z2[low] = np.nan
-        zfill = inpaint(z2, spec)
+        zfill = inpaint(z2, spec, offset=offset)
     radius = window_radius(window, cell, spec.nx, spec.ny)
     obj = progressive_objects(zfill, cell, slope, radius, advance)
     obj = step_check(obj, zfill, edge_step, edge_share)
@@ -136,7 +137,7 @@ def provisional_dtm(
         kept = np.zeros_like(kept)
         kept.flat[int(np.nanargmin(zmin))] = True
     zpro = np.where(kept, zmin, np.nan)
-    zpro = inpaint(zpro, spec)
+    zpro = inpaint(zpro, spec, offset=offset)
     return SmrfSurface(zpro, spec, kept, arg[kept])
 
 
@@ -155,10 +156,15 @@ def smrf(
     edge_step: float = DEFAULTS["edge_step"],
     edge_share: float = DEFAULTS["edge_share"],
     advance: Callable[[int], None] | None = None,
+    offset: tuple[int, int] = (0, 0),
 ) -> tuple[np.ndarray, SmrfSurface]:
-    """SMRF ground mask of local points ``xyz`` (n×3) and the provisional DTM."""
+    """SMRF ground mask of local points ``xyz`` (n×3) and the provisional DTM.
+
+    ``offset``: (row, column) of the local grid's cell (0, 0) in the grid of a larger cloud
+    that ``xyz`` is cut from (a chunk of a tiled run; only the inpainting jitter uses it)."""
     surf = provisional_dtm(
-        xyz, cell=cell, slope=slope, window=window, edge_step=edge_step, edge_share=edge_share, advance=advance
+        xyz, cell=cell, slope=slope, window=window, edge_step=edge_step, edge_share=edge_share, advance=advance,
+        offset=offset,
     )
     g = gradient_slope(surf.grid, cell)
     ground = np.empty(len(xyz), dtype=bool)

@@ -89,17 +89,26 @@ __all__ = [
 
 # ------------------------------------------------------------------ signatures
 def structure_signatures(xyz: np.ndarray, radii: Sequence[float], *, query_xyz: np.ndarray | None = None,
-                         progress: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+                         progress: bool | None = None, origin: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
     """Signatures ``(m, len(radii), 4)`` (float64, NaN where fewer than 3 neighbours or
     all neighbours coincide) and neighbour counts ``(m, len(radii))`` of the query points
-    (default: every point of ``xyz``)."""
-    from ..features.api import feature_arrays, radii_list, scale_suffix
+    (default: every point of ``xyz``).  ``origin`` (default: the per-axis minimum of ``xyz``)
+    is the neighbour index's local origin: a chunk of a larger cloud given the whole cloud's
+    minimum gets the whole cloud's signatures bit for bit (:mod:`lidarfx.tiles`)."""
+    from ..features.api import feature_arrays, feature_index, radii_list, scale_suffix
+    from ..features.registry import resolve
 
     rs = radii_list(None, radii)
     if not rs:
         raise LidarfxError("give a radius (e.g. radius=1.5) or several radii")
-    f = feature_arrays(xyz, ["eigenvalue1", "eigenvalue2", "eigenvalue3", "centroid_offset", "n_neighbours"],
-                       radii=rs, query_xyz=query_xyz, progress=progress)
+    names = ["eigenvalue1", "eigenvalue2", "eigenvalue3", "centroid_offset", "n_neighbours"]
+    index = None
+    if origin is not None:
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if len(xyz):
+            index = feature_index(xyz, "sphere", None, rs, resolve(names), origin=np.asarray(origin, dtype=np.float64))
+    f = feature_arrays(xyz, names, radii=rs, query_xyz=query_xyz, progress=progress, index=index)
     m = len(f["n_neighbours" if len(rs) == 1 else "n_neighbours" + scale_suffix(rs[0])])
     sig = np.empty((m, len(rs), len(SIGNATURE)))
     cnt = np.empty((m, len(rs)))
