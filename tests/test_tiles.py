@@ -142,7 +142,7 @@ def test_several_tiles_and_knn(scene, run_cli, tmp_path):
 
 
 def test_on_a_dask_cluster(scene, tmp_path, run_cli):
-    distributed = pytest.importorskip("distributed")
+    import distributed  # a dependency of lidarfx (dask[distributed])
     d, src, _ = scene
     mem = tmp_path / "mem.las"
     rc, _, err = run_cli(["features", str(src), str(mem), "-r", "0.6", "-f", "eigen,msac", "-q"])

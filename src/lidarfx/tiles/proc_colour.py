@@ -278,14 +278,11 @@ def colour_process(chunk, ctx, o: dict):
     result.meta.pop("source", None)
     by = o["by"]
     if by == "morphology" and o.get("normals") == "computed":
-        from ..features.api import feature_arrays, feature_index
         from ..features.registry import resolve
+        from .processors import chunk_feature_arrays
 
-        r = float(o["radius"])
-        req = resolve(list(NORMAL_NAMES))
-        index = feature_index(cloud.xyz, "sphere", None, [r], req, origin=np.asarray(ctx.mins, dtype=np.float64))
-        f = feature_arrays(cloud.xyz, req, radius=r, query_xyz=cloud.xyz[own], query_ids=chunk.ids[own],
-                           scanner=o.get("scanner"), progress=False, index=index)
+        f = chunk_feature_arrays(chunk, ctx, resolve(list(NORMAL_NAMES)), [float(o["radius"])],
+                                 scanner=o.get("scanner"))
         normals = np.column_stack([np.asarray(f[k], dtype=np.float64) for k in NORMAL_NAMES])
         c16 = to_uint16(morphology_rgb(normals, sun_azimuth=o.get("sun_azimuth", 315.0),
                                        sun_altitude=o.get("sun_altitude", 45.0)))

@@ -59,33 +59,41 @@ def check_features_options(o: dict) -> None:
                   msac_iterations=100, seed=o.get("seed", 0), scanner=o.get("scanner"))
 
 
+def chunk_feature_arrays(chunk, ctx, req, radii, *, neighbourhood: str = "sphere", k: int | None = None,
+                         **opts) -> dict[str, np.ndarray]:
+    """:func:`lidarfx.features.api.feature_arrays` of a chunk's owned points, with the whole
+    cloud's index layout (origin = the global minimum, the global kNN cell) and global indices
+    (MSAC's per-point random draws): the whole cloud's values, bit for bit.  ``opts`` go to
+    ``feature_arrays``.  kNN without a radius cap checks that every k-th neighbour lies within
+    the buffer."""
+    from ..features.api import feature_arrays, feature_index
+
+    cloud, own = chunk.cloud, chunk.own
+    index = feature_index(cloud.xyz, neighbourhood, k, radii, req, origin=np.asarray(ctx.mins, dtype=np.float64),
+                          knn_cell=_knn_cell(ctx, int(k)) if neighbourhood == "knn" else None)
+    q = cloud.xyz[own]
+    arrays = feature_arrays(cloud.xyz, req, radii=radii, neighbourhood=neighbourhood, k=k, query_xyz=q,
+                            query_ids=chunk.ids[own], progress=False, index=index, **opts)
+    if neighbourhood == "knn" and not radii:
+        _check_knn_reach(chunk, ctx, index, q, int(k))
+    return arrays
+
+
 def features_process(chunk, ctx, o: dict):
-    """Features of the owned points with the whole cloud's index layout (origin = the global
-    minimum, the global kNN cell) and global indices (MSAC's per-point random draws)."""
-    from ..features.api import _point_feature, feature_arrays, feature_index, radii_list
+    """The features of the owned points (:func:`chunk_feature_arrays`) and the per-point ones."""
+    from ..features.api import _point_feature, radii_list
     from ..features.registry import resolve
 
     cloud, own = chunk.cloud, chunk.own
     req = resolve(o.get("features"))
     result = cloud.subset(own)
     result.meta.pop("source", None)
-    point = {name: _point_feature(name, cloud)[own] for name in req.point}
-    result.update(point)
-    if not req.slots:
-        return result
-    nb = o.get("neighbourhood", "sphere")
-    k = o.get("k")
-    rs = radii_list(None, o.get("radii") or [])
-    index = feature_index(cloud.xyz, nb, k, rs, req, origin=np.asarray(ctx.mins, dtype=np.float64),
-                          knn_cell=_knn_cell(ctx, int(k)) if nb == "knn" else None)
-    q = cloud.xyz[own]
-    arrays = feature_arrays(cloud.xyz, req, radii=rs, neighbourhood=nb, k=k, query_xyz=q, query_ids=chunk.ids[own],
-                            scanner=o.get("scanner"), height=o.get("height"), convention=o.get("convention", "default"),
-                            d_max=o.get("d_max", 0.10), hist_bins=o.get("hist_bins", 10), seed=o.get("seed", 0),
-                            progress=False, index=index)
-    if nb == "knn" and not rs:
-        _check_knn_reach(chunk, ctx, index, q, int(k))
-    result.update(arrays)
+    result.update({name: _point_feature(name, cloud)[own] for name in req.point})
+    if req.slots:
+        result.update(chunk_feature_arrays(
+            chunk, ctx, req, radii_list(None, o.get("radii") or []), neighbourhood=o.get("neighbourhood", "sphere"),
+            k=o.get("k"), scanner=o.get("scanner"), height=o.get("height"), convention=o.get("convention", "default"),
+            d_max=o.get("d_max", 0.10), hist_bins=o.get("hist_bins", 10), seed=o.get("seed", 0)))
     return result
 
 
