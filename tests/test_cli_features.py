@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -100,18 +101,41 @@ def test_features_list_and_subprocess_exit_code(tmp_path):
     assert res.returncode == 2 and "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1
 
 
-def test_demo_writes_its_outputs(tmp_path):
+def test_demo_scenes_meet_their_targets(tmp_path):
+    """Two scenes of the demo: products, pictures, reports and an index, with the figures against
+    the scenes' truth (the whole demo runs in the slow tests and in CI's Quick-start check)."""
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out)]) == 0
-    for name in ("facade.laz", "facade_features.laz", "facade_features.png", "summary.json"):
-        assert (out / name).stat().st_size > 0
+    assert main(["demo", "--out", str(out), "--scenes", "rockface,house", "-q"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    per = summary["per_class_r0.50"]
-    # the features separate the facade classes: walls are vertical planes, vegetation is scattered
-    assert per["wall"]["verticality"] > 0.9 and per["ground"]["verticality"] < 0.05
-    assert per["wall"]["planarity"] > per["vegetation"]["planarity"] + 0.2
-    assert per["vegetation"]["sphericity"] > 5 * per["wall"]["sphericity"]
-    assert "planarity_r0.10" in summary["features"]
+    assert [s["name"] for s in summary["scenes"]] == ["rockface", "house"]
+    figures = {(s["name"], f["measure"]): f for s in summary["scenes"] for f in s["figures"]}
+    assert figures[("rockface", "sets found (true: 3)")]["value"] == 3
+    assert figures[("rockface", "largest angle to the true set, °")]["value"] < 1.0
+    assert figures[("house", "ridge covered (share of its length)")]["value"] >= 0.9
+    assert all(s["passed"] for s in summary["scenes"])
+    for name, files in ((s["name"], s["files"]) for s in summary["scenes"]):
+        assert (out / name / "index.html").stat().st_size > 0
+        for path in files.values():
+            assert Path(path).stat().st_size > 0
+    index = (out / "index.html").read_text()
+    assert 'href="rockface/index.html"' in index and 'href="house/index.html"' in index
+    assert (out / "house" / "edges.geojson").exists() and (out / "rockface" / "stereonet.png").exists()
+
+
+def test_demo_refuses_an_unknown_scene(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "d"), "--scenes", "castle"]) == 2
+    assert "unknown demo scene 'castle'" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.slow
+def test_whole_demo_meets_every_target(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "-q"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [s["name"] for s in summary["scenes"]] == ["facade", "rockface", "powerline", "house", "dike"]
+    missed = [(s["name"], f["measure"], f["value"]) for s in summary["scenes"] for f in s["figures"] if f["pass"] is False]
+    assert not missed
 
 
 @pytest.mark.parametrize("ext", [".laz", ".npz", ".ply"])

@@ -405,59 +405,25 @@ def _morphology_key(ax, sun_azimuth: float, sun_altitude: float) -> None:
                  fontsize=7)
 
 
-_MAX_SPLAT = 12.0
-
-
 def _zbuffer(u, v, near, colours, pixels: int):
-    """Raster of about ``pixels`` cells along the longer side; every point covers a disc of
-    1.5 × the median distance to its 4th nearest neighbour in the picture plane (so random
-    sampling leaves no holes), and every cell shows the nearest point covering it
-    (largest ``near``; a lexsort, then the last entry of each cell).  Returns the image
+    """Raster of about ``pixels`` cells along the longer side, drawn by the splat kernel
+    (:func:`lidarfx.render.splat.splat`): every point covers a disc of
+    :func:`~lidarfx.render.splat.auto_point_size` (1.5 × the median distance to its 4th nearest
+    neighbour in the picture plane, 1 to 12 cells, so random sampling leaves no holes) and
+    every cell shows the nearest point covering it (largest ``near``).  Returns the image
     ``(rows, cols, 3)`` (row 0 = bottom, empty cells white), the cell size, the columns and
     rows, and the minimum u and v."""
-    from scipy.spatial import cKDTree
-
-    from .render import _top_of_cells
+    from .render.splat import Frame, auto_point_size, splat
 
     u0, v0 = float(u.min()), float(v.min())
-    uu, vv = u - u0, v - v0
-    ext = max(float(uu.max()), float(vv.max()), 1e-9)
-    cell = ext / max(int(pixels), 10)
-    nu, nv = int(float(uu.max()) / cell) + 1, int(float(vv.max()) / cell) + 1
-    iu = np.minimum((uu / cell).astype(np.int64), nu - 1)
-    iv = np.minimum((vv / cell).astype(np.int64), nv - 1)
-    n = len(uu)
-    reach = 0.0
-    if n >= 5:
-        m = min(n, 200_000)
-        pick = np.random.default_rng(0).choice(n, m, replace=False) if m < n else np.arange(n)
-        uv = np.column_stack([uu[pick], vv[pick]])
-        q = uv[np.random.default_rng(1).choice(m, 20_000, replace=False)] if m > 20_000 else uv
-        d, _ = cKDTree(uv).query(q, k=5)
-        d4 = float(np.median(d[:, 4])) * math.sqrt(m / n)  # a subsample of m of n points spaces out by sqrt(n/m)
-        reach = min(1.5 * d4 / cell, _MAX_SPLAT)
-    k = int(math.floor(reach))
-    di, dj = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1))
-    disc = (di ** 2 + dj ** 2) <= max(reach, 0.0) ** 2
-    di, dj = di[disc], dj[disc]
-    img = np.ones((nu * nv, 3))
-    step = max(1, 4_000_000 // len(di))
-    best_pix, best_near, best_pt = [], [], []
-    for a in range(0, n, step):  # blocks bound the memory; each block's winners compete at the end
-        pu = (iu[a:a + step, None] + di[None, :]).ravel()
-        pv = (iv[a:a + step, None] + dj[None, :]).ravel()
-        pt = np.repeat(np.arange(a, min(a + step, n)), len(di))
-        inside = (pu >= 0) & (pu < nu) & (pv >= 0) & (pv < nv)
-        pix = pv[inside] * nu + pu[inside]
-        pt = pt[inside]
-        win = _top_of_cells(pix, near[pt])
-        best_pix.append(pix[win])
-        best_near.append(near[pt[win]])
-        best_pt.append(pt[win])
-    pix, pt = np.concatenate(best_pix), np.concatenate(best_pt)
-    win = _top_of_cells(pix, np.concatenate(best_near))
-    img[pix[win]] = colours[pt[win]]
-    return img.reshape(nv, nu, 3), cell, nu, nv, u0, v0
+    span_u, span_v = float(u.max()) - u0, float(v.max()) - v0
+    cell = max(span_u, span_v, 1e-9) / max(int(pixels), 10)
+    nu, nv = int(span_u / cell) + 1, int(span_v / cell) + 1
+    winner, _ = splat(u, v, near, Frame(nu, nv, u0, v0, cell), auto_point_size(u, v, cell))
+    img = np.ones((nv, nu, 3))
+    shown = winner >= 0
+    img[shown] = colours[winner[shown]]
+    return np.ascontiguousarray(img[::-1]), cell, nu, nv, u0, v0
 
 
 def colour_picture(
@@ -480,8 +446,9 @@ def colour_picture(
     upward — within 45° of vertical a top view (ALS terrain), else a horizontal elevation facing
     the surface (a steep rock face).  No view is mirrored.  The picture is a raster of about
     ``pixels`` cells along the longer side; every point covers a disc of 1.5 × the median
-    distance to its 4th nearest neighbour in the picture plane (at most 12 cells, so random
-    sampling leaves no holes) and each cell shows the nearest point covering it (a z-buffer);
+    distance to its 4th nearest neighbour in the picture plane (1 to 12 cells, so random
+    sampling leaves no holes) and each cell shows the nearest point covering it (the z-buffer
+    kernel of :mod:`lidarfx.render.splat`);
     empty cells are white.  Axes are world coordinates in metres, less a round offset (as the
     label says) beyond 10 km; the horizontal axis of a rotated elevation is the distance from
     its leftmost point.  With ``key`` and

@@ -14,10 +14,10 @@ from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
 
 COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
                    "eigenclass", "edges", "powerlines", "discontinuities", "colour", "breaklines", "thin", "section", "parts",
-                   "members"]
+                   "members", "render", "report"]
 
 EPILOG = """examples:
-  lidarfx demo                                   # run the main job on the bundled sample
+  lidarfx demo                                   # the main job on synthetic scenes -> lidarfx-demo/index.html
   lidarfx info scan.laz --json                   # points, bounds, classes, CRS
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
   lidarfx synth facade facade.laz --seed 1       # generate a scene with ground truth
@@ -31,6 +31,9 @@ EPILOG = """examples:
   lidarfx section tower.laz cut.laz --from -4,0 --to 4,0 --width 0.2 --image cut.png --by z
   lidarfx parts tower.laz out/                              # bolts, insulators, corona rings of a lattice tower
   lidarfx members tower.laz members.geojson --dxf members.dxf   # tower members as 3-D lines
+  lidarfx render scan.laz scan.png --by class --view top      # a picture: z-buffered splats, eye-dome lighting
+  lidarfx report scan.laz report/ -r 0.5                    # an HTML page with a 3-D viewer of the cloud
+  lidarfx edges roofs.laz lines.geojson --report report/    # any analysis command: its run as an HTML page
 """
 
 

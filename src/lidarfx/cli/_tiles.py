@@ -71,8 +71,12 @@ def wants_tiles(args, command: str, by_size: bool = True) -> bool:
 def run_tiles(args, command: str, options: dict) -> int:
     """Run ``command`` in chunks and print its summary (``--json``: on stdout)."""
     from .. import _json
+    from ..errors import LidarfxError
     from ..tiles import run_tiled
 
+    if getattr(args, "report", None):
+        raise LidarfxError("--report is written by runs in memory; a chunked run writes no report "
+                           "(make one of an output file with lidarfx report, or use --chunk-size 0)")
     progress = False if args.quiet else None
     res = run_tiled(inputs_of(args.input), args.output, command, options, chunk_size=args.chunk_size,
                     buffer=args.buffer, workers=args.workers, scheduler=args.scheduler, resume=args.resume,

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_picture_path, columns_of, emit_summary
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx breaklines als.laz lines.geojson                            # ground = class 2 (else the ground filter)
@@ -72,6 +73,7 @@ def register(sub) -> None:
     p.add_argument("--join", type=float, default=None, help="largest gap between parts that are connected, m (default 8 x the point spacing)")
     p.add_argument("--simplify", type=float, default=D["simplify"], help="Douglas-Peucker tolerance, m (default %(default)s)")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -133,6 +135,7 @@ def run(args) -> int:
     if args.csv is not None:
         csv_path = Path(args.csv) if args.csv else out.with_suffix(".csv")
         check_output_folder(csv_path)
+    report = ReportJob(args)
     approx = _read_approximations(args.approximations) if args.approximations else None
     params = dict(radius=args.radius, min_curvature=args.min_curvature, patch_length=args.patch_length,
                   patch_width=args.patch_width, gap=args.gap, step=args.step, min_angle=args.min_angle,
@@ -150,15 +153,17 @@ def run(args) -> int:
         vpath = csv_path.with_suffix(".vertices.csv")
         write_csv_rows(vpath, _vertex_rows(res.lines), ["id", "vertex", "x", "y", "z", "sigma_xy", "sigma_z", "angle"])
         written["vertices_csv"] = str(vpath)
-    if args.picture:
+    picture = args.picture or (report.picture("breaklines.png") if report.wanted else None)
+    if picture and res.ground.any():
         from ..ground.dtm import dtm
         from ..render import breakline_view
 
         spacing = (1.0 / max(res.meta["density"], 1e-9)) ** 0.5
         raster = dtm(cloud.xyz[res.ground], resolution=float(f"{max(0.5, 2.0 * spacing):.2g}"))
-        breakline_view(raster, res.lines, args.picture,
+        breakline_view(raster, res.lines, picture,
                        title=f"{Path(args.input).name}: {len(res.lines)} structure lines, {res.meta['total_length']:,.0f} m")
-        written["picture"] = str(args.picture)
+        if args.picture:
+            written["picture"] = str(args.picture)
     t3 = time.perf_counter()
     summary = {
         "input": str(args.input),
@@ -172,6 +177,15 @@ def run(args) -> int:
         "parameters": res.meta["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},
     }
+    import numpy as np
+
+    shown = cloud.copy()
+    shown["breakline_ground"] = np.asarray(res.ground, dtype=np.uint8)
+    page = report.write(f"Breaklines of {Path(args.input).name}", summary, cloud=shown, colour_by="z",
+                        lines={"breaklines": res.lines},
+                        pictures=[(picture, "structure lines over the shaded DTM")] if picture else ())
+    if page:
+        written["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import _json
 from ._args import add_columns, check_output, check_picture_path, columns_of, read_clouds, xyz
+from ._report import ReportJob, add_report_option
 from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 
 EPILOG = """examples:
@@ -194,6 +195,7 @@ def register(sub) -> None:
     pr.add_argument("--max-multi-return-share", type=float, default=None, metavar="S",
                     help="see-through test of that rule (see 'classify train --help'); 1 = off; default: the model's")
     add_columns(pr)
+    add_report_option(pr)
     add_tile_options(pr)
     _add_common(pr)
     pr.set_defaults(func=run_predict)
@@ -240,6 +242,7 @@ def register(sub) -> None:
                         "backward_elimination.png with those options")
     g = _add_train_options(e)
     add_columns(e)
+    add_report_option(e)
     _add_common(e)
     # what --model cannot use: the options that configure a training or a cross-validation
     # (g._group_actions: argparse's list of the "model" group's options)
@@ -341,6 +344,7 @@ def run_predict(args) -> int:
     check_output(args.input, args.output)
     if args.picture:
         check_picture_path(args.picture)
+    report = ReportJob(args)
     say = _log(args)
     t0 = time.perf_counter()
     model = load_model(args.model)
@@ -369,16 +373,18 @@ def run_predict(args) -> int:
     io.write(out, args.output, progress=False if args.quiet else None, **opts)
     t3 = time.perf_counter()
     cls = np.asarray(out["classification"])
-    if args.picture:
+    picture = args.picture or (report.picture("classes.png") if report.wanted else None)
+    if picture:
         from ..classify import usable_mask
         from ..classify.pipeline import unit_to_metre
         from ..render import class_map
 
         idx = np.where(usable_mask(out), model.classes.index_of(cls), -1)  # an output code is in its group
         u = unit_to_metre(out)
-        class_map(out.xyz[:, :2] * u, out.xyz[:, 2] * u, idx, list(model.classes.names), args.picture,
+        class_map(out.xyz[:, :2] * u, out.xyz[:, 2] * u, idx, list(model.classes.names), picture,
                   title=f"{Path(args.input).name} classified with {Path(args.model).name}")
-        say(f"class map -> {args.picture}")
+        if args.picture:
+            say(f"class map -> {args.picture}")
     counts = {int(c): int(n) for c, n in zip(*np.unique(cls, return_counts=True))}
     summary = {"input": args.input, "output": args.output, "model": args.model, "points": len(out),
                "predicted": int(out.meta["classify"]["predicted_points"]), "classes": counts,
@@ -390,6 +396,12 @@ def run_predict(args) -> int:
                "upgraded_point_format": opts.get("point_format"),
                "picture": args.picture,
                "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)}}
+    page = report.write(f"Classes of {Path(args.input).name}", summary, cloud=out, colour_by="classification",
+                        labels={"classification": {int(c): n for c, n in zip(model.classes.codes, model.classes.names)}},
+                        pictures=[(picture, "predicted classes (plan view)")] if picture else ())
+    if page:
+        summary["report"] = page
+        say(f"report -> {page}")
     if args.json:
         _json.dump(summary, sys.stdout, indent=2)
         print()
@@ -490,6 +502,7 @@ def run_evaluate(args) -> int:
     from ..errors import LidarfxError
 
     say = _log(args)
+    page_job = ReportJob(args)
     if args.out:
         _out_dir(args.out, create=False)  # a file in the way fails before the work
     if args.spatial_blocks < 0:
@@ -534,8 +547,37 @@ def run_evaluate(args) -> int:
     if args.out:
         written = write_report(report, args.out)
         say(f"report -> {', '.join(str(p) for p in written)}")
+    if page_job.wanted:
+        say(f"HTML report -> {_evaluation_page(page_job, report, args)}")
     if args.json:
         print(report_json(report))
     else:
         print(format_report(report))
     return 0
+
+
+def _evaluation_page(job: ReportJob, report: dict, args) -> str:
+    """The HTML page of ``classify evaluate``: the set-up, one row per section and per test file
+    (OA, kappa, mean F1 and their intervals), the per-class table of each section, the confusion
+    matrices, error maps and importances."""
+    from ..classify import write_report
+
+    cfg = report["config"]
+    figures = {"classes": report.get("class_spec"), "classifier": cfg.get("classifier"),
+               "features": len(report["features"]), "radii": list(cfg.get("radii", [])),
+               "training files": [Path(f["name"]).name for f in report["train_files"]]}
+    rows, classes = [], {}
+    for key, sec in report["sections"].items():
+        parts = [(sec["title"], sec["metrics"])]
+        if key == "test" and len(sec["files"]) > 1:
+            parts = [(f"test: {Path(n).name}", m) for n, m in sec["files"].items()] + [("test: pooled", sec["metrics"])]
+        for title, m in parts:
+            ci = m.get("ci") or {}
+            rows.append({"section": title, "points": m["points"], "OA": m["oa"], "kappa": m["kappa"],
+                         "mean F1": m["mean_f1"], "mean IoU": m["mean_iou"],
+                         "mean F1 interval": "–".join(f"{v:.3f}" for v in ci["mean_f1"]) if ci else None})
+            classes[title] = [{k: c[k] for k in ("name", "code", "support", "pa", "ua", "f1", "iou")} for c in m["classes"]]
+    scratch = job.scratch() / "evaluate"
+    pictures = [(str(p), p.stem.replace("_", " ")) for p in write_report(report, scratch) if p.suffix == ".png"]
+    summary = {**figures, "sections": rows, **{f"classes: {t}": r for t, r in classes.items()}}
+    return job.write("Classification evaluation", summary, pictures=pictures)

@@ -1,122 +1,105 @@
-"""``lidarfx demo``: the main job on the bundled sample, outputs in one folder."""
+"""``lidarfx demo``: the main job on synthetic scenes with ground truth, one report linking them."""
 from __future__ import annotations
 
 import argparse
 import time
 from pathlib import Path
 
-from .. import _json
+from ._args import emit_summary
 
-EPILOG = """example:
-  lidarfx demo                 # writes ./lidarfx-demo/
-  lidarfx demo --out /tmp/fx   # another folder
+EPILOG = """examples:
+  lidarfx demo                               # writes ./lidarfx-demo/, open lidarfx-demo/index.html
+  lidarfx demo --out /tmp/fx                 # another folder
+  lidarfx demo --scenes powerline,dike       # some of the scenes
+  lidarfx demo --seed 7 --json               # other random scenes; figures as JSON on stdout
 
-The bundled sample is the synthetic TLS house facade of lidarfx.synth (seed 1:
-ground, wall, roof, window, vegetation, clutter, noise with ground truth).  The
-demo computes multi-scale eigen, plane, density and height features, writes the
-cloud as LAZ with the features as extra-bytes dimensions, a JSON summary, a
-per-class table and a picture.
+scenes (lidarfx.synth, each with its ground truth):
+  facade     features + a classifier trained on one facade scan, applied to another
+  rockface   joint sets of a rock face (stereonet, Fisher statistics, spacing)
+  powerline  wires, catenaries and pylons of a corridor
+  house      3-D edge lines of a house (ridge, eaves)
+  dike       breaklines of a dike and a ditch in ALS terrain
+Each scene's folder holds the scene (LAZ), the products (LAZ, GeoJSON, DXF, CSV,
+PNG) and an HTML report (3-D viewer with the products drawn in); index.html
+links them with every figure against the scene's truth and its target.
+The first run compiles the numba kernels; they are cached after that.
 """
-
-SHOWN = ("planarity", "linearity", "verticality", "sphericity", "echo_ratio", "z_range")
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "demo",
-        help="run the main job on the bundled sample",
-        description="Compute features on the bundled facade sample and write LAZ, JSON and PNG outputs.",
+        help="run the main job on bundled synthetic scenes and write one HTML report",
+        description="Run features, classification, joint sets, power lines, edges and breaklines on synthetic "
+                    "scenes with ground truth; write the products and an HTML report linking them.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", default="lidarfx-demo", help="output folder (created; default ./lidarfx-demo)")
-    p.add_argument("--seed", type=int, default=1, help="seed of the sample scene")
+    p.add_argument("--scenes", default=None, metavar="A,B",
+                   help="comma-separated scenes (default: all: facade,rockface,powerline,house,dike)")
+    p.add_argument("--seed", type=int, default=None, help="seed of every scene (default: each scene's own)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress, no table")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from rich.console import Console
 
-    from .. import synth
+    from ..demo import SCENES, run_demo
     from ..errors import LidarfxError
+    from ..synth._common import make_rng
 
     console = Console(stderr=True)
+    scenes = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else list(SCENES)
+    unknown = [s for s in scenes if s not in SCENES]
+    if unknown or not scenes:
+        raise LidarfxError(f"unknown demo scene {unknown[0] if unknown else args.scenes!r}; "
+                           f"the scenes are {', '.join(SCENES)}")
+    if args.seed is not None:
+        make_rng(args.seed)  # a bad seed is refused before the folder is made
     out = Path(args.out)
-    t0 = time.perf_counter()
-    scene = synth.facade(seed=args.seed)  # checks the seed before the folder is made
+    if out.exists() and not out.is_dir():
+        raise LidarfxError(f"{out} exists and is not a folder")
     created = next((p for p in reversed([out, *out.parents]) if not p.exists()), None)  # topmost new folder
+    say = (lambda m: None) if args.quiet or args.json else (lambda m: console.print(m))
+    say(f"[bold]lidarfx demo[/]: {len(scenes)} scenes -> {out}/")
+    t0 = time.perf_counter()
     try:
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise LidarfxError(f"cannot create output folder {out}: {exc.strerror}") from None
-        _run(console, out, scene, t0)
+        res = run_demo(out, scenes, seed=args.seed, progress=lambda m: say(f"  {m}"))
+        from .. import _json
+        from .._atomic import atomic_path
+
+        with atomic_path(out / "summary.json") as tmp:
+            tmp.write_text(_json.dumps(res, indent=2) + "\n")
     except BaseException:
         if created is not None:  # no folder left behind by a failed run
             import shutil
 
             shutil.rmtree(created, ignore_errors=True)
         raise
+    res["summary"] = str(out / "summary.json")
+    res["seconds"] = round(time.perf_counter() - t0, 2)
+    emit_summary(args, res, lambda s: _print_summary(console, s))
     return 0
 
 
-def _run(console, out: Path, scene, t0: float) -> None:
-    import numpy as np
+def _print_summary(console, s: dict) -> None:
     from rich.table import Table
 
-    from .. import io
-    from ..features import compute_features
-    from ..render import feature_views
-
-    io.write(scene, out / "facade.laz")
-    radii = [0.1, 0.3, 0.5]
-    console.print(f"[bold]lidarfx demo[/]: {len(scene):,} points, features at radii {radii} m")
-    t1 = time.perf_counter()
-    feats = compute_features(scene, ["eigen", "plane", "density", "height"], radii=radii, progress=False)
-    t2 = time.perf_counter()
-    io.write(feats, out / "facade_features.laz")
-    t3 = time.perf_counter()
-
-    classes = scene.meta.get("truth", {}).get("classes", {})
-    code_name = {int(v): k for k, v in classes.items()}
-    cls = np.asarray(scene["classification"])
-    table = Table(title="mean feature per class (r = 0.50 m)")
-    table.add_column("class")
-    table.add_column("points", justify="right")
-    for name in SHOWN:
-        table.add_column(name, justify="right")
-    per_class = {}
-    for code in np.unique(cls):
-        sel = cls == code
-        label = code_name.get(int(code), str(int(code)))
-        means = {n: float(np.nanmean(feats[f"{n}_r0.50"][sel])) for n in SHOWN}
-        per_class[label] = {"code": int(code), "points": int(sel.sum()), **{k: round(v, 4) for k, v in means.items()}}
-        table.add_row(label, f"{int(sel.sum()):,}", *[f"{means[n]:.3f}" for n in SHOWN])
-    console.print(table)
-
-    pic = feature_views(
-        feats,
-        ["classification", "planarity_r0.50", "verticality_r0.50", "linearity_r0.10"],
-        out / "facade_features.png",
-        view="front",
-        labels={"classification": code_name},
-        title="lidarfx demo: synthetic facade, classes and features (front view)",
-    )
-    summary = {
-        "points": len(feats),
-        "radii": radii,
-        "features": feats.meta["features"],
-        "seconds": {"features": round(t2 - t1, 3), "total": round(time.perf_counter() - t0, 3)},
-        "per_class_r0.50": per_class,
-        "outputs": {
-            "scene": str(out / "facade.laz"),
-            "features": str(out / "facade_features.laz"),
-            "picture": str(pic),
-        },
-    }
-    with open(out / "summary.json", "w") as fh:
-        _json.dump(summary, fh, indent=2)
-    console.print(
-        f"features {t2 - t1:.2f} s, write {t3 - t2:.2f} s -> {out}/ "
-        "(facade.laz, facade_features.laz, facade_features.png, summary.json)"
-    )
+    t = Table(title="figures against the scenes' truth", title_justify="left")
+    for col in ("scene", "measure", "value", "target", ""):
+        t.add_column(col, justify="right" if col == "value" else "left")
+    for sc in s["scenes"]:
+        for f in sc["figures"]:
+            v = f["value"]
+            mark = "" if f["pass"] is None else ("[green]ok[/]" if f["pass"] else "[red]missed[/]")
+            t.add_row(sc["name"], f["measure"], "" if v is None else f"{v:g}", f["target"], mark)
+    console.print(t)
+    console.print(f"{sum(sc['points'] for sc in s['scenes']):,} points in {len(s['scenes'])} scenes, "
+                  f"{s['seconds']:.1f} s -> open {s['index']}")

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_output_dir, columns_of, emit_summary, xyz
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx discontinuities face.laz out/                               # radius from the point spacing
@@ -74,6 +75,7 @@ def register(sub) -> None:
     p.add_argument("--cloud-format", choices=("laz", "las", "none"), default="laz", help="format of the output cloud (default %(default)s)")
     p.add_argument("--no-picture", action="store_true", help="do not draw stereonet.png, rose.png and sets.png")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -86,6 +88,7 @@ def run(args) -> int:
     from ..discontinuities.output import draw_pictures, write_tables
 
     out = check_output_dir(args.outdir)
+    report = ReportJob(args)
     import numpy as np
 
     parse_reference_plane(args.reference_plane, None if args.scanner is None else np.asarray(args.scanner))
@@ -127,6 +130,12 @@ def run(args) -> int:
         "parameters": m["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **m["seconds"], "write": round(t3 - t2, 3)},
     }
+    if report.wanted:
+        pictures = [] if not args.no_picture else [  # drawn in OUTDIR already, else for the report
+            (p, Path(p).stem) for p in draw_pictures(res, report.scratch(), name=Path(args.input).name).values()]
+        page = report.write(f"Discontinuities of {Path(args.input).name}", summary, cloud=res.cloud, colour_by="set_id",
+                            pictures=pictures)
+        written["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, add_line_outputs, columns_of, emit_summary, line_output_paths
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx edges roofs.laz lines.geojson                              # radius from the point spacing
@@ -54,6 +55,7 @@ def register(sub) -> None:
     p.add_argument("--keep-cloud-border", action="store_true", help="keep lines along the cloud's outer boundary")
     p.add_argument("--seed", type=int, default=0, help="seed of the RANSAC draws, default %(default)s")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -66,6 +68,7 @@ def run(args) -> int:
     from ..vector import export_lines
 
     paths = line_output_paths(args, "lines")
+    report = ReportJob(args)
     labels = [s.strip() for s in args.labels.split(",") if s.strip()]
     progress = False if args.quiet else None
     t0 = time.perf_counter()
@@ -84,12 +87,14 @@ def run(args) -> int:
     if paths["cloud"]:
         io.write(res.cloud, paths["cloud"], progress=progress)
         written["cloud"] = paths["cloud"]
-    if paths["picture"]:
+    picture = paths["picture"] or (report.picture("lines.png") if report.wanted else None)
+    if picture:
         from ..render import lines_view
 
-        lines_view(res.cloud, res.lines, paths["picture"],
+        lines_view(res.cloud, res.lines, picture,
                    title=f"{Path(args.input).name}: {len(res.lines)} edge lines, r = {res.meta['radius']:g}")
-        written["picture"] = paths["picture"]
+        if paths["picture"]:
+            written["picture"] = paths["picture"]
     t3 = time.perf_counter()
     kinds: dict[str, dict[str, float]] = {}
     for pl in res.lines:
@@ -114,6 +119,11 @@ def run(args) -> int:
         "parameters": res.meta["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},
     }
+    page = report.write(f"Edge lines of {Path(args.input).name}", summary, cloud=res.cloud, colour_by="structure",
+                        lines={"edge lines": res.lines}, pictures=[(picture, "edge lines over the points (plan view)")]
+                        if picture else ())
+    if page:
+        written["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

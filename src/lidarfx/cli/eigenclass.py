@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ._args import add_columns, check_picture_path, emit_summary, read_input
 from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx eigenclass roofs.laz roofs_struct.laz                 # radius from the point spacing
@@ -76,6 +77,7 @@ def register(sub) -> None:
     p.add_argument("--keep-signature", action="store_true", help="also write e1, e2, e3, centroid_offset, n_neighbours")
     p.add_argument("--picture", default=None, metavar="PNG", help="also draw a plan-view map of the labels")
     add_columns(p)
+    add_report_option(p)
     add_tile_options(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
@@ -112,6 +114,7 @@ def run(args) -> int:
 
     if args.picture:
         check_picture_path(args.picture)
+    report = ReportJob(args)
     _check_reject(args.reject)
     _check_min_neighbours(args.min_neighbours)
     refs, kind = resolve_references(args.references)  # a bad file is refused before reading the cloud
@@ -133,14 +136,15 @@ def run(args) -> int:
                               keep_signature=args.keep_signature, progress=progress, inplace=True)
     t2 = time.perf_counter()
     io.write(out, args.output, progress=progress)
-    if args.picture:
+    picture = args.picture or (report.picture("structure.png") if report.wanted else None)
+    if picture:
         import numpy as np
 
         from ..render import class_map
 
         names = [LABELS[k] for k in range(0, 8)]
         class_map(out.xyz[:, :2] - out.xyz[:, :2].min(axis=0), out.xyz[:, 2], np.asarray(out["structure"]), names,
-                  args.picture, title=f"{Path(args.input).name}: structure classes, r = {', '.join(f'{r:g}' for r in out.meta['structures']['radii'])}")
+                  picture, title=f"{Path(args.input).name}: structure classes, r = {', '.join(f'{r:g}' for r in out.meta['structures']['radii'])}")
     t3 = time.perf_counter()
     meta = out.meta["structures"]
     n = max(len(out), 1)
@@ -158,6 +162,10 @@ def run(args) -> int:
         "shares": {k: round(v / n, 6) for k, v in meta["counts"].items()},
         "seconds": {"read": round(t1 - t0, 3), "classify": round(t2 - t1, 3), "write": round(t3 - t2, 3)},
     }
+    page = report.write(f"Structure classes of {Path(args.input).name}", summary, cloud=out, colour_by="structure",
+                        pictures=[(picture, "structure classes (plan view)")] if picture else ())
+    if page:
+        summary["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

@@ -8,6 +8,7 @@ import time
 from .. import _json
 from ._args import add_columns, check_output, read_input, xyz
 from ._tiles import TILE_HELP, add_tile_options, run_tiles, wants_tiles
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx features in.laz out.laz -r 0.5 --features eigen,plane,density
@@ -53,6 +54,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the MSAC generator")
     add_columns(p)
     add_tile_options(p)
+    add_report_option(p)
     p.add_argument("--list", action="store_true", help="list feature groups and names, then exit")
     p.add_argument("--json", action="store_true", help="print a JSON summary (timings, NaN shares) on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
@@ -78,6 +80,7 @@ def run(args) -> int:
     tiled = wants_tiles(args, "features")
     if not tiled:
         check_output(args.input, args.output)  # outputs are checked before anything else
+    report = ReportJob(args)
     if args.neighbourhood != "knn" and not radii:
         raise LidarfxError("give a radius: -r 0.5 (repeat -r for several scales)")
     if tiled:
@@ -107,11 +110,18 @@ def run(args) -> int:
     for name in names:
         cloud[name] = placeholder
     nan_count = dict.fromkeys(names, 0)
+    # the report's points keep their feature values as the chunks go by
+    shown = report.sample(len(cloud)) if report.wanted else None
+    kept = {name: np.full(len(shown), np.nan, np.float32) for name in names} if shown is not None else {}
 
     def counted(start: int, stop: int) -> dict:
         values = fill(start, stop)
         for name, v in values.items():
             nan_count[name] += int(np.count_nonzero(np.isnan(v)))
+        if shown is not None:
+            a, b = np.searchsorted(shown, [start, stop])
+            for name, v in values.items():
+                kept[name][a:b] = np.asarray(v)[shown[a:b] - start]
         return values
 
     t2 = time.perf_counter()
@@ -128,6 +138,14 @@ def run(args) -> int:
         "nan_share": {name: round(c / n, 6) for name, c in nan_count.items()},
         "seconds": {"read": round(t1 - t0, 3), "index": round(t2 - t1, 3), "features_and_write": round(t3 - t2, 3)},
     }
+    if shown is not None:
+        from pathlib import Path
+
+        sub = cloud.subset(shown)
+        sub.update(kept)
+        summary["report"] = report.write(f"Features of {Path(args.input).name}", summary, cloud=sub, points=len(cloud),
+                                         attributes=[n for n in ("classification",) if n in sub] + names[:15],
+                                         colour_by=names[0] if names else None)
     if args.json:
         _json.dump(summary, sys.stdout, indent=2)
         print()

@@ -4,9 +4,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from .. import _json
 from ._args import add_columns, check_output, columns_of
+from ._report import ReportJob, add_report_option
 from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 
 GROUND_EPILOG = """examples:
@@ -115,6 +117,7 @@ def register(sub) -> None:
     p.add_argument("--dtm", default=None, metavar="RASTER", help="also write a DTM raster (.tif or .asc)")
     p.add_argument("-r", "--resolution", type=float, default=1.0, help="DTM cell (map units), default 1.0")
     add_columns(p)
+    add_report_option(p)
     add_tile_options(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
@@ -187,6 +190,7 @@ def run_ground(args) -> int:
         return run_tiles(args, "ground", ground_options(params, ignore_classes=args.ignore_classes, hag=args.hag,
                                                         inputs=inputs_of(args.input)))
     check_output(args.input, args.output)
+    report = ReportJob(args)
     if args.dtm:
         _check_raster_path(args.dtm)
         check_resolution(args.resolution)
@@ -226,6 +230,9 @@ def run_ground(args) -> int:
             "write": round(t4 - t3, 3),
         },
     }
+    page = report.write(f"Ground of {Path(args.input).name}", summary, cloud=out, colour_by="classification")
+    if page:
+        summary["report"] = page
     if args.json:
         _json.dump(summary, sys.stdout, indent=2)
         print()

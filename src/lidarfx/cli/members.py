@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, add_line_outputs, columns_of, emit_summary, line_output_paths
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx members tower.laz members.geojson
@@ -57,6 +58,7 @@ def register(sub) -> None:
     add_line_outputs(p, "members", picture="also draw the members over the points",
                      cloud="also write the cloud with member_id and member_label")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -72,6 +74,7 @@ def run(args) -> int:
                                            "min_length", "link", "max_gap", "join", "seed") if getattr(args, k) is not None}
     prm = check_parameters(**given)
     paths = line_output_paths(args, "members")
+    report = ReportJob(args)
     progress = False if args.quiet else None
     t0 = time.perf_counter()
     cloud = io.read(args.input, columns=columns_of(args), progress=progress)
@@ -92,13 +95,15 @@ def run(args) -> int:
         out["member_label"] = res.member_label
         io.write(out, paths["cloud"], progress=progress)
         written["cloud"] = paths["cloud"]
-    if paths["picture"]:
+    picture = paths["picture"] or (report.picture("members.png") if report.wanted else None)
+    if picture:
         from ..render.members import members_view
 
-        members_view(cloud.xyz, res.lines, paths["picture"],
+        members_view(cloud.xyz, res.lines, picture,
                      title=f"{Path(args.input).name}: {len(res.lines)} members, {res.meta['total_length']:,.1f} m "
                            f"(r = {res.meta['radius']:g} m)")
-        written["picture"] = paths["picture"]
+        if paths["picture"]:
+            written["picture"] = paths["picture"]
     t3 = time.perf_counter()
     labels: dict[str, dict[str, float]] = {}
     for pl in res.lines:
@@ -124,6 +129,16 @@ def run(args) -> int:
         "parameters": res.meta["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},
     }
+    if report.wanted:
+        shown = cloud.copy()
+        shown["member_id"] = res.member_id
+        shown["member_label"] = res.member_label
+        from ..tower.members import LABELS
+
+        page = report.write(f"Tower members of {Path(args.input).name}", summary, cloud=shown, colour_by="member_label",
+                            labels={"member_label": {v: k for k, v in LABELS.items()} | {-1: "none"}},
+                            lines={"members": res.lines}, pictures=[(picture, "members")] if picture else ())
+        written["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_output_dir, columns_of, emit_summary
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx parts tower.laz out/                          # bolts, insulators, corona rings
@@ -61,6 +62,7 @@ def register(sub) -> None:
     p.add_argument("--cloud-format", choices=("laz", "las", "none"), default="laz", help="format of the output cloud (default %(default)s)")
     p.add_argument("--no-picture", action="store_true", help="do not draw parts.png")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -87,9 +89,10 @@ def _read_truth(path: str) -> dict:
 def run(args) -> int:
     from .. import io
     from .._atomic import check_not_same_file
-    from ..tower.parts import check_options, detect_small_parts, draw_picture, evaluate_parts, write_tables
+    from ..tower.parts import KINDS, check_options, detect_small_parts, draw_picture, evaluate_parts, write_tables
 
     out = check_output_dir(args.outdir)
+    report = ReportJob(args)
     params = dict(radius=args.radius, threshold=args.threshold, noise=args.noise, min_points=args.min_points,
                   min_size=args.min_size, max_size=args.max_size, link=args.link, compact=not args.no_compact,
                   compact_link=args.compact_link, max_compact_size=args.max_compact_size)
@@ -112,6 +115,8 @@ def run(args) -> int:
         written["cloud"] = str(cloud_path)
     if not args.no_picture:
         written["picture"] = draw_picture(res, out / "parts.png", title=Path(args.input).name)
+    elif report.wanted:
+        draw_picture(res, report.picture("parts.png"), title=Path(args.input).name)
     t3 = time.perf_counter()
     m = res.meta
     summary = {
@@ -129,6 +134,11 @@ def run(args) -> int:
     if evaluation is not None:
         summary["evaluation"] = {k: {kk: (round(vv, 4) if isinstance(vv, float) else vv) for kk, vv in v.items()}
                                  for k, v in evaluation.items()}
+    if report.wanted:
+        pictures = [] if not args.no_picture else [(report.picture("parts.png"), "parts")]
+        written["report"] = report.write(f"Small parts of {Path(args.input).name}", summary, cloud=res.cloud,
+                                         colour_by="part_kind", pictures=pictures,
+                                         labels={"part_kind": {v: k for k, v in KINDS.items()} | {-1: "none"}})
     emit_summary(args, summary, _print_summary)
     return 0
 

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_output_dir, columns_of, emit_summary
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx powerlines corridor.laz out/                        # ground = class 2 (else the ground filter)
@@ -55,6 +56,7 @@ def register(sub) -> None:
     p.add_argument("--cloud-format", choices=("laz", "las", "none"), default="laz", help="format of the classified cloud (default %(default)s)")
     p.add_argument("--no-picture", action="store_true", help="do not draw wires.png")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -100,6 +102,7 @@ def run(args) -> int:
     cases = [parse_load_case(c) for c in args.load_case]  # refuse bad specs before any work
     cond = conductor(args.conductor) if cases else None
     out = check_output_dir(args.outdir)
+    report = ReportJob(args)
     cloud_path = out / f"cloud.{args.cloud_format}" if args.cloud_format != "none" else None
     if cloud_path is not None:
         check_not_same_file(args.input, cloud_path)
@@ -121,12 +124,14 @@ def run(args) -> int:
     if cloud_path is not None:
         io.write(res.cloud, cloud_path, progress=progress)
         written["cloud"] = str(cloud_path)
-    if not args.no_picture:
+    picture = out / "wires.png" if not args.no_picture else (report.picture("wires.png") if report.wanted else None)
+    if picture:
         from ..render import powerline_view
 
-        powerline_view(res, out / "wires.png", title=f"{Path(args.input).name}: {len(res.conductors)} conductors, "
+        powerline_view(res, picture, title=f"{Path(args.input).name}: {len(res.conductors)} conductors, "
                        f"{len(res.spans)} spans, {len(res.pylons)} pylons")
-        written["picture"] = str(out / "wires.png")
+        if not args.no_picture:
+            written["picture"] = str(picture)
     t3 = time.perf_counter()
     import math
 
@@ -150,6 +155,13 @@ def run(args) -> int:
         "parameters": res.meta["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},
     }
+    if report.wanted:
+        from ..powerlines.output import conductor_polylines
+
+        page = report.write(f"Power lines of {Path(args.input).name}", summary, cloud=res.cloud,
+                            colour_by="classification", lines={"catenaries": conductor_polylines(res, args.step)},
+                            pictures=[(picture, "wires, catenaries and profiles")] if picture else ())
+        written["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

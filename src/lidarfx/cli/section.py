@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._args import add_columns, check_output, check_picture_path, columns_of, emit_summary, finite_numbers
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx section tower.laz cut.laz --from 0,-5 --to 0,5 --width 0.2 --image cut.png
@@ -61,6 +62,7 @@ def register(sub) -> None:
                    help="also compute these features (groups or names, as lidarfx features) for the slab points")
     p.add_argument("-r", "--radius", type=float, default=None, help="sphere radius of computed features (m)")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -78,6 +80,7 @@ def run(args) -> int:
 
     frame = section_frame(args.start, args.end, args.width, args.normal)
     check_output(args.input, args.output)
+    report = ReportJob(args)
     by = args.by.strip() if args.by else ""
     if not by:
         raise LidarfxError("--by needs an attribute name, x, y, z or class")
@@ -149,6 +152,11 @@ def run(args) -> int:
         "seconds": {"read": round(t1 - t0, 3), "section": round(t2 - t1, 3), "write": round(t3 - t2, 3),
                     "image": round(t4 - t3, 3)},
     }
+    page = report.write(f"Section of {Path(args.input).name}", summary, cloud=cut,
+                        colour_by=by if by in cut else ("classification" if by == "class" else None),
+                        pictures=[(args.image, f"section coloured by {by}")] if args.image else ())
+    if page:
+        summary["report"] = page
     emit_summary(args, summary, _print_summary)
     return 0
 

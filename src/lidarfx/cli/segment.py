@@ -9,6 +9,7 @@ from pathlib import Path
 from .. import _json
 from ._args import add_columns, check_picture_path, read_input, xyz
 from ._tiles import inputs_of
+from ._report import ReportJob, add_report_option
 
 EPILOG = """examples:
   lidarfx segment scan.laz seg.laz                       # LIS defaults (dense TLS)
@@ -64,6 +65,7 @@ def register(sub) -> None:
     p.add_argument("--picture", default=None, metavar="PNG", help="also draw the segments (top view, one colour each) into this PNG")
     p.add_argument("--top", type=int, default=10, help="segments listed in the summary, default %(default)s")
     add_columns(p)
+    add_report_option(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
@@ -92,6 +94,7 @@ def run(args) -> int:
         raise LidarfxError(f"--top is the number of segments listed, 0 or more; got {args.top}")
     if args.picture:
         check_picture_path(args.picture)
+    report = ReportJob(args)
     from ..segment.planes import _check_params
 
     # the library's checks, before reading the cloud
@@ -129,10 +132,11 @@ def run(args) -> int:
         csv_path, json_path = _table_paths(args)
         write_segments_csv(rows, csv_path)
         write_segments_json(rows, json_path, meta)
-    if args.picture:
+    picture = args.picture or (report.picture("segments.png") if report.wanted else None)
+    if picture:
         from ..render import segment_view
 
-        segment_view(out, args.picture, height_panel=True, title=f"{Path(args.input).name}: {len(rows)} segments")
+        segment_view(out, picture, height_panel=True, title=f"{Path(args.input).name}: {len(rows)} segments")
     t4 = time.perf_counter()
 
     n = len(out)
@@ -155,6 +159,10 @@ def run(args) -> int:
         ],
         "seconds": {"read": round(t1 - t0, 3), "segment": round(t2 - t1, 3), "table": round(t3 - t2, 3), "write": round(t4 - t3, 3)},
     }
+    page = report.write(f"Plane segments of {Path(args.input).name}", summary, cloud=out, colour_by="segment_id",
+                        pictures=[(picture, "segments")] if picture else ())
+    if page:
+        summary["report"] = page
     if args.json:
         _json.dump(summary, sys.stdout, indent=2)
         print()

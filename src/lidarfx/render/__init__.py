@@ -598,3 +598,12 @@ def breakline_view(dtm, lines: Sequence, path: str | Path, *, reference: Sequenc
     handles = [plt.Line2D([], [], color=colours.get(k, "#ff7f0e"), lw=2, label=f"{k}: {len(v)} lines, {sum(v):,.0f} m")
                for k, v in sorted(seen.items())]
     return _finish_line_map(fig, ax, handles, bool(reference), "reference", span_x, span_y, x0, y0, title, path, dpi)
+
+
+def __getattr__(name: str):
+    # the splat renderer's numba kernels load on first use (lidarfx.render.splat)
+    if name in ("render_points", "render_picture"):
+        from . import splat
+
+        return getattr(splat, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -537,15 +537,16 @@ def _set_raster(xyz: Any, set_ids: Any, *, view_normal: Any = None, pixels: int 
     Points are projected on the image frame of :func:`_image_frame`; the raster is
     ``pixels`` cells wide (cells never finer than 1.5 × the mean point spacing, so
     there are few holes, and at most 4 × ``pixels`` rows); each cell shows the point
-    nearest to the viewer (largest ``p · n``, a z-buffer by ``np.lexsort``), and the
-    remaining pin holes are filled from their neighbours (:func:`_fill_holes`).  Returns
+    nearest to the viewer (largest ``p · n``; the z-buffer kernel
+    :func:`lidarfx.render.splat.splat`, one cell per point), and the remaining pin holes
+    are filled from their neighbours (:func:`_fill_holes`).  Returns
     ``image`` (``(rows, cols, 3)``, row 0 at the bottom, white = empty), ``extent``
     (metres, for ``imshow``), ``cell``, ``normal``, ``right``, ``up``, ``index`` (the
     points used), ``winner`` (``(rows, cols)``: the shown point as an index into
     ``index``, −1 = empty), ``filled`` (cells filled from neighbours) and ``counts``
     (``{set id: points}`` of all finite input points).
     """
-    from . import _top_of_cells
+    from .splat import Frame, splat
 
     p = np.asarray(xyz, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3:
@@ -578,13 +579,8 @@ def _set_raster(xyz: Any, set_ids: Any, *, view_normal: Any = None, pixels: int 
     cell = max(ext_u / pixels, ext_v / (4 * pixels), 1.5 * spacing, 1e-9)
     nu = max(int(math.ceil(ext_u / cell - 1e-9)), 1)  # exactly ``pixels`` wide when the width sets the cell
     nv = max(int(math.ceil(ext_v / cell - 1e-9)), 1)
-    iu = np.minimum(((u - u0) / cell).astype(np.int64), nu - 1)
-    iv = np.minimum(((v - v0) / cell).astype(np.int64), nv - 1)
-    pix = iv * nu + iu
-    top = _top_of_cells(pix, depth)
-    win = np.full(nv * nu, -1, np.int64)
-    win[pix[top]] = top
-    win, filled = _fill_holes(win.reshape(nv, nu), depth)
+    win, _ = splat(u, v, depth, Frame(nu, nv, u0, v0, cell), 0.0)
+    win, filled = _fill_holes(np.ascontiguousarray(win[::-1]), depth)  # row 0 at the bottom
     img = np.ones((nv, nu, 3))
     shown = win >= 0
     img[shown] = set_colours(ids[win[shown]])
