@@ -134,12 +134,12 @@ def test_metrics_match_sklearn():
 # --------------------------------------------------------------------------- class maps
 def test_class_map_merge_ignore_and_roundtrip():
     cm = ClassMap.parse("2,3+4+5,6")
-    assert cm.groups == ((2,), (3, 4, 5), (6,)) and cm.codes == (2, 3, 6)
+    assert cm.groups == ((2,), (3, 4, 5), (6,)) and cm.codes == (2, 5, 6)  # a merged class: its highest code
     assert cm.names == ("ground", "vegetation", "building")
     np.testing.assert_array_equal(cm.index_of(np.array([1, 2, 3, 4, 5, 6, 64], np.uint8)), [-1, 0, 1, 1, 1, 2, -1])
-    np.testing.assert_array_equal(cm.code_of([0, 1, 2]), [2, 3, 6])
-    named = ClassMap.parse("ground=2,veg=3+4+5:5,building=6")
-    assert named.codes == (2, 5, 6) and named.names == ("ground", "veg", "building")
+    np.testing.assert_array_equal(cm.code_of([0, 1, 2]), [2, 5, 6])
+    named = ClassMap.parse("ground=2,veg=3+4+5:3,building=6")
+    assert named.codes == (2, 3, 6) and named.names == ("ground", "veg", "building")
     assert ClassMap.parse(named.spec()) == named
     assert ClassMap.parse([2, [3, 4, 5], 6]) == cm
     assert cm.without([4, 6]).groups == ((2,), (3, 5))
@@ -154,7 +154,7 @@ def test_training_ignores_unlisted_classes_and_merges(facades):
     counts = model.meta["training"]["counts"]["used"]
     assert set(counts) == {"ground", "high vegetation/class 66", "building"}
     pred = model.predict(b)
-    assert set(np.unique(pred)) <= {2, 5, 6}  # the merged class gets its first code
+    assert set(np.unique(pred)) <= {2, 66, 6}  # the merged class gets its highest code
     ref = ClassMap.parse("2,5+66,6").index_of(b["classification"])
     ok = ref >= 0
     acc = (model.classes.index_of(pred)[ok] == ref[ok]).mean()

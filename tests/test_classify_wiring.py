@@ -536,7 +536,7 @@ def test_ignoring_a_code_renames_only_the_default_names():
     m = ClassMap.parse("2,5+64,6,veg=3+4+7:4").without([64, 7])
     assert m.names == ("ground", "high vegetation", "building", "veg")  # 'high vegetation/class 64' no more
     assert m.groups == ((2,), (5,), (6,), (3, 4)) and m.codes == (2, 5, 6, 4)
-    assert ClassMap.parse("2,3+4+5:3,6").without([3]).codes == (2, 4, 6)  # the output code left with its code
+    assert ClassMap.parse("2,3+4+5:3,6").without([3]).codes == (2, 5, 6)  # the output code left: the highest
     # numpy arrays as ignore lists (truth value of an array is ambiguous)
     from lidarfx.classify.model import read_sources, resolve_classes
 

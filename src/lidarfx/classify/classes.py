@@ -3,8 +3,9 @@
 A class map is written like ``2,3+4+5,6``: a comma-separated list of output
 classes, each one or several source codes joined by ``+`` (merged), optionally
 named (``ground=2,vegetation=3+4+5,building=6``).  The output code of a merged
-class is its first source code (``3+4+5`` → 3) unless given after a colon
-(``vegetation=3+4+5:5``).  Every code that is not listed is **ignored**: never
+class is its highest source code (``3+4+5`` → 5: high vegetation, the class a
+merged vegetation mostly is in ALS) unless given after a colon
+(``vegetation=3+4+5:3``).  Every code that is not listed is **ignored**: never
 used for training, never counted in an evaluation (the classifier still labels
 those points when it predicts).
 """
@@ -83,7 +84,7 @@ class ClassMap:
                     "or ground=2,vegetation=3+4+5,building=6"
                 )
             g = tuple(int(c) for c in m.group("codes").replace(" ", "").split("+"))
-            out = int(m.group("out")) if m.group("out") is not None else g[0]
+            out = int(m.group("out")) if m.group("out") is not None else max(g)
             if out not in g:
                 raise LidarfxError(f"output code {out} of {item!r} is not one of its classes")
             groups.append(g)
@@ -113,7 +114,7 @@ class ClassMap:
             g2 = tuple(x for x in g if x not in ign)
             if g2:
                 groups.append(g2)
-                codes.append(c if c in g2 else g2[0])
+                codes.append(c if c in g2 else max(g2))
                 names.append(_default_name(g2) if n == _default_name(g) else n)  # a given name stays
         return ClassMap(tuple(groups), tuple(codes), tuple(names))
 
@@ -151,7 +152,7 @@ class ClassMap:
         out = []
         for g, c, n in zip(self.groups, self.codes, self.names):
             item = "+".join(str(x) for x in g)
-            if c != g[0]:
+            if c != max(g):
                 item += f":{c}"
             out.append(f"{n}={item}")
         return ",".join(out)

@@ -38,11 +38,11 @@ EPILOG = """examples:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with our one-line error and exit code 2."""
+    """argparse with our one-line error and exit code 2 (no usage block: the error names the
+    ``--help`` to read)."""
 
     def error(self, message: str) -> None:  # pragma: no cover - exercised via CLI tests
-        self.print_usage(sys.stderr)
-        print(f"{self.prog}: error: {message}", file=sys.stderr)
+        print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(EXIT_USAGE)
 
 

@@ -131,7 +131,8 @@ def register(sub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     e.add_argument("inputs", nargs="+", metavar="IN", help="labelled point cloud(s)")
-    e.add_argument("--reference-class", type=int, default=2, help="ground class of the reference (default 2)")
+    e.add_argument("--reference-class", type=_int_list, default=[2], metavar="C[,C...]",
+                   help="ground class(es) of the reference, e.g. 2 or 2,9 (default 2)")
     _add_params(e)
     add_columns(e)
     e.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
@@ -246,10 +247,10 @@ def run_ground(args) -> int:
     return 0
 
 
-def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict, progress=None,
+def evaluate_file(path: str, reference_class, ignore_classes, params: dict, progress=None,
                   columns: list[str] | None = None) -> dict:
     """Read ``path`` (text with the ``columns`` spec), hide its classes from the filter, score
-    against ``reference_class``."""
+    against ``reference_class`` (a class code or a list of them: the reference ground)."""
     import numpy as np
 
     from .. import io
@@ -271,7 +272,7 @@ def evaluate_file(path: str, reference_class: int, ignore_classes, params: dict,
     t0 = time.perf_counter()
     pred = classify_ground(bare, ignore_classes=None, progress=progress, **params)
     sec = time.perf_counter() - t0
-    res = ground_errors(pred, cls[keep] == reference_class)
+    res = ground_errors(pred, np.isin(cls[keep], np.atleast_1d(reference_class)))
     res.update(file=path, ignored_points=int((~keep).sum()), seconds=round(sec, 3))
     return res
 
@@ -283,8 +284,11 @@ def run_eval(args) -> int:
 
     progress = False if args.quiet else None
     params = _params(args)
-    if not 0 <= args.reference_class <= 255:
-        raise LidarfxError(f"--reference-class must be a class code 0..255, got {args.reference_class}")
+    if not args.reference_class:
+        raise LidarfxError("--reference-class needs at least one class code, e.g. 2 or 2,9")
+    for c in args.reference_class:
+        if not 0 <= c <= 255:
+            raise LidarfxError(f"--reference-class must be a class code 0..255, got {c}")
     rows = [evaluate_file(f, args.reference_class, args.ignore_classes, params, progress, columns_of(args))
             for f in args.inputs]
     mean = {k: float(np.mean([r[k] for r in rows])) for k in ("type_i", "type_ii", "total")}
@@ -297,11 +301,12 @@ def run_eval(args) -> int:
         )
         print()
         return 0
-    print(f"{'file':40s} {'points':>8s} {'type I %':>9s} {'type II %':>9s} {'total %':>8s}")
+    w = max([len(r["file"]) for r in rows] + [4])  # whole paths: a table never cuts a file name
+    print(f"{'file':{w}s} {'points':>8s} {'type I %':>9s} {'type II %':>9s} {'total %':>8s}")
     for r in rows:
-        print(f"{r['file'][-40:]:40s} {r['n_points']:8d} {100 * r['type_i']:9.2f} {100 * r['type_ii']:9.2f} {100 * r['total']:8.2f}")
+        print(f"{r['file']:{w}s} {r['n_points']:8d} {100 * r['type_i']:9.2f} {100 * r['type_ii']:9.2f} {100 * r['total']:8.2f}")
     if len(rows) > 1:
-        print(f"{'mean':40s} {'':8s} {100 * mean['type_i']:9.2f} {100 * mean['type_ii']:9.2f} {100 * mean['total']:8.2f}")
+        print(f"{'mean':{w}s} {'':8s} {100 * mean['type_i']:9.2f} {100 * mean['type_ii']:9.2f} {100 * mean['total']:8.2f}")
     return 0
 
 

@@ -11,8 +11,8 @@ Output formats (chosen by the file extension):
   writer (numpy only: uncompressed float32, GeoTIFF tags ModelPixelScale,
   ModelTiepoint and GeoKeyDirectory with the EPSG code when one is known,
   GDAL_NODATA = nan) plus a ``.tfw`` world file.
-* ``.asc`` — ESRI ASCII grid (``NODATA_value -9999``) plus a ``.prj`` with the
-  WKT when the CRS has one.
+* ``.asc`` — ESRI ASCII grid (``NODATA_value -9999``) plus a ``.prj`` (ESRI WKT1, from the
+  CRS's WKT or EPSG code) when the cloud has a CRS.
 
 All files are written atomically (temporary file + rename).
 """
@@ -201,10 +201,26 @@ class Raster:
             with open(tmp, "w") as fh:
                 fh.write(header)
                 np.savetxt(fh, arr, fmt="%.3f")
-        wkt = (self.crs or {}).get("wkt")
+        wkt = _prj_text(self.crs)
         if wkt:
             with atomic_path(p.with_suffix(".prj")) as tmp:
                 tmp.write_text(wkt)
+
+
+def _prj_text(crs: dict | None) -> str | None:
+    """The ``.prj`` of an ESRI grid: ESRI WKT1 of the CRS (from its WKT or EPSG code, by pyproj),
+    the WKT as it is when pyproj cannot convert it, None without a CRS."""
+    crs = crs or {}
+    wkt, epsg = crs.get("wkt"), crs.get("epsg")
+    if not wkt and not epsg:
+        return None
+    try:
+        from pyproj import CRS
+        from pyproj.enums import WktVersion
+
+        return CRS.from_user_input(wkt or int(epsg)).to_wkt(WktVersion.WKT1_ESRI)
+    except Exception:  # an unusual WKT pyproj does not read: written as the file has it
+        return wkt or None
 
 
 def _world_file(r: Raster) -> str:

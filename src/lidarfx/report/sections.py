@@ -80,7 +80,7 @@ def summary_sections(summary: Mapping[str, Any]) -> tuple[dict, list[tuple[str, 
     figures: dict[str, Any] = {}
     tables: list[tuple[str, list[dict]]] = []
     for key, v in summary.items():
-        if key == "outputs" or key in ("output",) and isinstance(v, dict):
+        if key == "outputs":
             continue
         title = key.replace("_", " ")
         if _scalar(v) or (isinstance(v, (list, tuple)) and all(_scalar(x) for x in v) and len(v) <= 12):
