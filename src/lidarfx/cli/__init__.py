@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import shlex
 import sys
 import warnings
 
@@ -66,7 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     from ._args import join_number_lists
 
     parser = build_parser()
-    args = parser.parse_args(join_number_lists(sys.argv[1:] if argv is None else list(argv)))
+    given = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(join_number_lists(given))
+    args.command_line = "lidarfx " + shlex.join(given)  # as typed, for the pages that record it
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE

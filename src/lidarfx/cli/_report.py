@@ -9,9 +9,7 @@ the page is written last, atomically.
 from __future__ import annotations
 
 import os
-import shlex
 import shutil
-import sys
 import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
@@ -26,9 +24,9 @@ def add_report_option(p) -> None:
     p.add_argument("--report", default=None, metavar="OUTDIR", help=REPORT_HELP)
 
 
-def command_line() -> str:
+def command_line(args) -> str:
     """The command as the user typed it (for the page's header)."""
-    return "lidarfx " + shlex.join(sys.argv[1:]) if sys.argv and sys.argv[0] else "lidarfx"
+    return getattr(args, "command_line", None) or "lidarfx"
 
 
 class ReportJob:
@@ -44,6 +42,7 @@ class ReportJob:
 
         folder = getattr(args, "report", None)
         self.dir = check_output_dir(folder) if folder else None
+        self.command = command_line(args)
         self._tmp: str | None = None
 
     @property
@@ -88,7 +87,7 @@ class ReportJob:
                                        summary_sections)
 
         try:
-            rep = Report(title, command=command_line(), max_points=MAX_REPORT_POINTS)
+            rep = Report(title, command=self.command, max_points=MAX_REPORT_POINTS)
             figures, tables = summary_sections(summary)
             if points is not None:
                 figures = {"points": points, **{k: v for k, v in figures.items() if k != "points"}}

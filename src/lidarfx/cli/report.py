@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import shlex
 import time
 from pathlib import Path
 
 from ._args import add_columns, check_output_dir, columns_of, emit_summary
+from ._report import command_line
 
 EPILOG = """examples:
   lidarfx report scan.laz scan_report/                         # summary, 3-D view, picture
@@ -54,23 +54,6 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary")
     p.set_defaults(func=run)
-
-
-def _command_line(args) -> str:
-    """The command as it would be typed again (options in their canonical form)."""
-    parts = ["lidarfx", "report", args.input, args.outdir]
-    if args.features:
-        parts += ["--features", args.features]
-    for r in args.radius or []:
-        parts += ["-r", f"{r:g}"]
-    for opt, value, default in (("--attributes", args.attributes, None), ("--colour-by", args.colour_by, None),
-                                ("--max-points", args.max_points, 1_000_000), ("--seed", args.seed, 0),
-                                ("--title", args.title, None), ("--columns", args.columns, None)):
-        if value is not None and value != default:
-            parts += [opt, str(value)]
-    if args.no_picture:
-        parts.append("--no-picture")
-    return shlex.join(parts)
 
 
 def _picture(cloud, names: list[str], title: str, labels: dict) -> bytes:
@@ -127,7 +110,7 @@ def run(args) -> int:
     t2 = time.perf_counter()
     attributes = wanted if wanted is not None else viewer_attributes(cloud, first=features)
     name = Path(args.input).name
-    report = Report(args.title or name, command=_command_line(args), max_points=args.max_points, seed=args.seed)
+    report = Report(args.title or name, command=command_line(args), max_points=args.max_points, seed=args.seed)
     summary_items = {"input": str(args.input), "points": len(cloud)}
     if features:
         summary_items["features"] = ", ".join(features)
