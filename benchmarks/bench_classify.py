@@ -6,7 +6,7 @@ Run by hand (not collected by pytest)::
     python benchmarks/bench_classify.py                       # both pipelines, IGN tiles (~10 min)
     python benchmarks/bench_classify.py --json bench.json     # also save every number
     python benchmarks/bench_classify.py --skip-baseline       # lidarfx only (~1–2 min)
-    python benchmarks/bench_classify.py --facade              # seed 001 experiment on the synthetic facade
+    python benchmarks/bench_classify.py --facade              # Lang's facade experiment on the synthetic facade
     python benchmarks/bench_classify.py --loto                # both pipelines, leave one training tile out
 
 The split (issue 5 acceptance): train on the three contiguous IGN LiDAR HD tiles
@@ -187,7 +187,7 @@ def lidarfx_default(train_paths, test_paths, cmap, seed: int, log, classifier: s
             "training_seconds": model.meta["training"]["seconds"]}
 
 
-# --------------------------------------------------------------------------- seed 001 (Lang)
+# --------------------------------------------------------------------------- Lang's facade experiment
 FACADE_CLASSES = "ground=2,vegetation=5,wall=6,roof=64,window=65,clutter=66"  # Lang's six; noise 7 ignored
 CHEHATA = "eigen,plane,msac,height"  # Chehata et al. 2009 (airborne): eigenvalues, local (robust) plane, heights
 LANG_TLS = "histogram,distribution"  # Lang's TLS features: height-difference histogram, spatial distribution
@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip-baseline", action="store_true", help="run lidarfx only")
     p.add_argument("--also-rf", action="store_true", help="also run lidarfx's features with a random forest")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--facade", action="store_true", help="run the seed-001 facade experiment instead (~4 min on 2 cores)")
+    p.add_argument("--facade", action="store_true", help="run Lang's facade experiment instead (~4 min on 2 cores)")
     p.add_argument("--loto", action="store_true",
                    help="leave one training tile out instead of the test files (training data only)")
     p.add_argument("--facade-per-class", type=int, default=5000,

@@ -1,7 +1,13 @@
 """Shared test helpers."""
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# the one-line "compiling kernels" notice of a cold numba cache would add a line to the stderr that
+# tests compare; tests/test_numba_cache.py checks the notice itself
+os.environ.setdefault("LIDARFX_COMPILE_NOTICE", "0")
 
 
 @pytest.fixture

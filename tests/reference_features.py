@@ -1,6 +1,6 @@
-"""Brute-force numpy reference of the SPEC §3 formulas, for one query point at a time.
+"""Brute-force numpy reference of the formulas of docs/features.md §3, for one query point at a time.
 
-Deliberately written from the SPEC text, independently of the numba kernels:
+Deliberately written from those formulas, independently of the numba kernels:
 scipy's KD-tree finds neighbours, numpy's eigh does the eigen solve.
 """
 from __future__ import annotations

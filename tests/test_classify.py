@@ -1,4 +1,4 @@
-"""Supervised classification (issue 5, seed 001): metrics, folds, class maps, models, CLI, IGN acceptance."""
+"""Supervised classification (docs/classification.md): metrics, folds, class maps, models, CLI, IGN acceptance."""
 from __future__ import annotations
 
 import json
@@ -643,7 +643,7 @@ def test_evaluate_checks_the_folds_before_the_features(facades, monkeypatch):
     def no_features(*a, **k):
         raise AssertionError("features computed before the fold check")
 
-    monkeypatch.setattr(E, "_file_features", no_features)
+    monkeypatch.setattr(E, "file_features", no_features)
     with pytest.raises(LidarfxError, match="spatial block"):
         evaluate([facades[0]], classes=FACADE6, cv=5, block_size=1000.0, **SMALL)  # 4 blocks (x, y straddle 0)
 
@@ -823,7 +823,6 @@ def test_cli_train_predict_evaluate(facade_files, capsys):
     [
         (["train", "{a}", "--model", "{d}/x.skops", "--features", "planarty"], "unknown feature 'planarty'"),
         (["train", "{a}", "--model", "{d}/x.skops", "--classes", "2,2"], "twice"),
-        (["train", "{a}", "--model", "{d}/x.skops", "--classes", "2,6"], "no return information"),  # default features
         (["train", "{a}", "--model", "{d}/x.pkl", "--classes", "2,6"], "should end in .skops"),
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops"], "not found"),
         (["predict", "{a}", "{d}/o.laz", "--model", "{d}/none.skops", "--picture", "{d}/map.jpg"], "PNG files"),
@@ -1202,7 +1201,7 @@ def ign_result():
 def test_ign_default_pipeline_regression(ign_result):
     """Train on the three IGN tiles, test on crop_1 + pont (classes 2 / 3+4+5 / 6, others ignored).
 
-    Measured (docs/classification.md §7, run 9): OA 0.955, mean F1 0.944, ≈ 30 s; the usual
+    Measured (docs/classification.md §7, 2026-11-22): OA 0.955, mean F1 0.944, ≈ 30 s; the usual
     pipeline (jakteristics 1/2/3 m + z + balanced RF) gets OA 0.43 on this split.
     """
     sec, seconds = ign_result
@@ -1240,7 +1239,8 @@ def test_default_list_with_inputs_left_out(facades, tmp_path, capsys):
                           ("default,-planarty", "unknown feature 'planarty'")):
         with pytest.raises(LidarfxError, match=message):
             feature_list(spec, [1])
-    # a file that has the return fields but 0 in every point (AHN4 exports): the error names the fix ...
+    # a file that has the return fields but 0 in every point (AHN4 exports): the default list leaves
+    # the return inputs out by itself (before: refused with a hint) ...
     a = facades[0]
     zero = np.zeros(len(a), np.uint8)
     path = tmp_path / "noreturns.laz"
@@ -1248,10 +1248,9 @@ def test_default_list_with_inputs_left_out(facades, tmp_path, capsys):
     model = tmp_path / "m.skops"
     args = ["classify", "train", str(path), "--model", str(model), "--classes", FACADE6, "-r", "0.5",
             "--max-per-class", "1000", "-q"]
-    assert main(args) == 2
-    err = capsys.readouterr().err
-    assert "has 'return_number' = 0 for every point" in err and "--features default,-return_ratio,-number_of_returns" in err
-    # ... and the fix trains a model with the default list's other inputs and the ALS building rule
+    assert main(args[:-1] + ["--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["features"] == 27
+    # ... as the list given explicitly does: the default list's other inputs and the ALS building rule
     assert main(args + ["--features", "default,-return_ratio,-number_of_returns", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["features"] == 27 and summary["min_building_area"] == 10.0  # 26 at 0.5 m + HAG

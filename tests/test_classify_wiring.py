@@ -98,7 +98,8 @@ def trained():
     transform, fit = LidarFeatures.transform, TrainConfig.fit_matrix
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(LidarFeatures, "transform", lambda self, X: (seen.append(X), transform(self, X))[1])
-        mp.setattr(TrainConfig, "fit_matrix", lambda self, X, y: (fitted.append(np.array(y)), fit(self, X, y))[1])
+        mp.setattr(TrainConfig, "fit_matrix",
+                   lambda self, X, y, progress=None: (fitted.append(np.array(y)), fit(self, X, y, progress))[1])
         model = train(cloud, classes=CLASSES, max_per_class=MAX_PER_CLASS, min_building_area=10, **FAST)
     return cloud, model, seen, fitted
 
@@ -183,7 +184,7 @@ def test_evaluate_model_confusion_and_intervals_per_file_and_pooled(trained, tes
     xy, g = np.vstack(xys), np.concatenate(files)
     assert len(np.unique(block_ids(xy, BLOCK))) < len(np.unique(block_ids(xy, BLOCK, groups=g)))  # same ground
     want = block_bootstrap(np.concatenate(refs), np.concatenate(preds), block_ids(xy, BLOCK, groups=g), k,
-                           n_boot=n_boot, block_size=BLOCK)
+                           n_boot=n_boot, block_size=BLOCK, strata=g)  # blocks resampled within each file
     assert rep["metrics"]["ci"] == want
     assert want["blocks"] == sum(rep["files"][c.meta["name"]]["ci"]["blocks"] for c in tests_clouds)
 

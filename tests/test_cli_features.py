@@ -63,7 +63,7 @@ def test_features_cli_multiscale_names(scene_las, tmp_path):
         (["--features", "eigen"], "give a radius"),
         (["-r", "-1"], "radii must be positive"),
         (["-n", "knn"], "k >= 1"),
-        # session 16: a traceback (numba cannot type the int), a 477 TiB allocation, a run of
+        # before these checks: a traceback (numba cannot type the int), a 477 TiB allocation, a run of
         # hours (10^8 bins per thread), and distances that only produced garbage ratios
         (["-r", "0.5", "-f", "msac", "--seed", "99999999999999999999999"], "seed must be an integer from 0 to 4294967295"),
         (["-r", "0.5", "--seed", "-1"], "seed must be an integer from 0"),

@@ -48,8 +48,8 @@ def anchors(path: Path) -> set[str]:
 
 
 def test_slug_follows_github():
-    assert slug("6.13 Adopted in session 9: small predicted-building clusters") == \
-        "613-adopted-in-session-9-small-predicted-building-clusters"
+    assert slug("6.13 Adopted: small clusters take their next class") == \
+        "613-adopted-small-clusters-take-their-next-class"
     assert slug("5. Evaluation: metrics, folds, reports") == "5-evaluation-metrics-folds-reports"
     assert slug("Quick start (`lidarfx demo`)") == "quick-start-lidarfx-demo"
 

@@ -59,3 +59,104 @@ def test_dtm_ascii_grid_gets_a_prj_from_an_epsg_code(tmp_path):
     assert (tmp_path / "b.prj").read_text() == prj
     Raster(np.zeros((2, 2), np.float32), (0.0, 0.0), 1.0, None).write(tmp_path / "c.asc")
     assert not (tmp_path / "c.prj").exists()
+
+
+# ---------------------------------------------------------------- progress by expected time
+class _FakeProgress:
+    started: list = []
+
+    def __init__(self, *a, **k):
+        self.tasks = {}
+
+    def start(self):
+        _FakeProgress.started.append(self)
+
+    def stop(self):
+        pass
+
+    def add_task(self, description, total=None, completed=0):
+        self.tasks[0] = [description, total, completed]
+        return 0
+
+    def advance(self, task, k):
+        self.tasks[task][2] += k
+
+
+def test_a_bar_appears_when_the_work_will_take_long_whatever_its_size(monkeypatch):
+    """Before: a bar only for 2 M points or more (a 90 s run on fewer points showed nothing).
+    Now: by the rate after AUTO_AFTER seconds."""
+    from lidarfx import progress
+
+    monkeypatch.setattr(progress, "_progress", lambda spinner=False: _FakeProgress())
+    _FakeProgress.started = []
+    now = [0.0]
+    # 1000 small units, 10 ms each: 10 s expected -> a bar once AUTO_AFTER has passed
+    with progress.bar("slow", 1000, None, clock=lambda: now[0]) as advance:
+        for _ in range(1000):
+            now[0] += 0.01
+            advance(1)
+    assert len(_FakeProgress.started) == 1
+    assert _FakeProgress.started[0].tasks[0][2] == 1000  # it counts from where the work was
+    _FakeProgress.started = []
+    now[0] = 0.0
+    # 10 M points in 0.2 s: no bar however many points
+    with progress.bar("fast", 10_000_000, None, clock=lambda: now[0]) as advance:
+        for _ in range(100):
+            now[0] += 0.002
+            advance(100_000)
+    assert _FakeProgress.started == []
+    with progress.bar("forced", 5, True) as advance:
+        advance(5)
+    assert len(_FakeProgress.started) == 1
+    with progress.bar("never", 5, False, clock=lambda: now[0]) as advance:
+        now[0] += 100
+        advance(1)
+    assert len(_FakeProgress.started) == 1
+
+
+def test_a_stage_shows_a_spinner_only_when_it_lasts(monkeypatch):
+    import time
+
+    from lidarfx import progress
+
+    monkeypatch.setattr(progress, "_progress", lambda spinner=False: _FakeProgress())
+    _FakeProgress.started = []
+    with progress.stage("quick", None, delay=0.3):
+        pass
+    time.sleep(0.4)
+    assert _FakeProgress.started == []
+    with progress.stage("long", None, delay=0.05):
+        time.sleep(0.3)
+    assert [p.tasks[0][0] for p in _FakeProgress.started] == ["long"]
+    assert progress.wanted(None) in (None, False) and progress.wanted(True) is True and progress.wanted(False) is False
+
+
+# ---------------------------------------------------------------- segmentation that fits the cloud
+def test_segment_stops_with_a_hint_that_works_when_nothing_is_found(run_cli, tmp_path):
+    """Before: `lidarfx segment` on an ALS cloud (a few points per m²) found 0 segments with the
+    dense-TLS defaults and exited 0.  Now it stops (exit 2, nothing written) naming the point
+    spacing and parameters from it, and those parameters find the roof planes."""
+    import re
+    import shlex
+
+    from lidarfx import io, synth
+
+    src = tmp_path / "house.laz"
+    io.write(synth.house(density=4.0, wall_density=0.5, seed=1), src)
+    out = tmp_path / "seg.laz"
+    rc, stdout, err = run_cli(["segment", str(src), str(out), "-q"])
+    assert rc == 2 and not out.exists()
+    assert len(err.strip().splitlines()) == 1 and "no plane segment found" in err
+    m = re.search(r"about ([0-9.]+) m apart", err)
+    assert m and 0.3 < float(m.group(1)) < 0.8  # 4 pts/m² on the roof: 0.5 m
+    opts = shlex.split(err.split("try ", 1)[1])
+    rc, stdout, err = run_cli(["segment", str(src), str(out), "--json", *opts])
+    assert rc == 0, err
+    import json
+
+    summary = json.loads(stdout)
+    seg = io.read(out)
+    z = seg.xyz[:, 2]
+    roof = (np.asarray(seg["classification"]) == synth.HOUSE_CLASSES["building"]) & (z > z.min() + 6.0)  # above the walls
+    assert summary["segments"] >= 3  # ground and the two roof planes
+    assert (np.asarray(seg["segment_id"])[roof] >= 0).mean() > 0.8

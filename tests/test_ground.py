@@ -28,7 +28,7 @@ REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 SAMPLES = ["samp11", "samp21", "samp23", "samp31", "samp41", "samp51", "samp53", "samp61"]
 
 # Total error (%) of the default parameters on each ISPRS sample, as measured
-# (docs/ground.md §4; re-measured in session 8 with the fixed-offset inpainting), and the bound the test holds
+# (docs/ground.md §4; re-measured on 2026-11-22 with the fixed-offset inpainting), and the bound the test holds
 # them to (measured + 0.5 percentage points, to allow tiny numerical changes).
 ISPRS_TOTAL = {
     "samp11": 7.73,

@@ -284,7 +284,9 @@ def test_cross_validation_applies_the_rule_per_held_out_part(town_model):
 
     fb, _ = block_folds(lab[2], 3, 20.0, 0, g)
     rule.set_folds("blocks", fb, block_size=20.0)  # a context point joins the fold of its block
-    key = lambda xy, gg: [tuple(r) for r in np.c_[gg, np.floor(xy[:, :2] / 20.0)].astype(int)]
+    def key(xy, gg):
+        return [tuple(r) for r in np.c_[gg, np.floor(xy[:, :2] / 20.0)].astype(int)]
+
     fold_of = dict(zip(key(rule.xyz, g), fb))
     assert rule.folds_c.tolist() == [fold_of.get(k, -1) for k in key(rule.xyz_c, rule.g_c)]
     rule.set_folds("files", g)

@@ -1,4 +1,4 @@
-"""Plane segmentation by surface growing (SPEC §4, issue 6): real answers on known shapes."""
+"""Plane segmentation by surface growing (docs/segmentation.md, issue 6): real answers on known shapes."""
 from __future__ import annotations
 
 import csv

@@ -1,4 +1,4 @@
-"""Selection by criteria: the safe expression parser and ``lidarfx select`` (SPEC §4, issue 6)."""
+"""Selection by criteria: the safe expression parser and ``lidarfx select`` (docs/segmentation.md §5, issue 6)."""
 from __future__ import annotations
 
 import json

@@ -1,4 +1,4 @@
-"""Unsupervised structure classes (doc 002): references, classification, acceptance on ideal structures."""
+"""Unsupervised structure classes (docs/structures.md): references, classification, acceptance on ideal structures."""
 from __future__ import annotations
 
 import copy
@@ -436,7 +436,7 @@ def test_multi_radius_distance_and_isolated_and_reject():
 
 
 def numpy_classify(sig, cnt, kind="trained", weighting="structure", reject=DEFAULT_REJECT):
-    """The classifier of doc 002 written out in numpy (one radius): labels, confidences, distances."""
+    """The classifier of docs/structures.md §2 written out in numpy (one radius): labels, confidences, distances."""
     cid, log_n, mean, std = default_references().tables(kind, weighting)
     m, P = len(sig), len(cid)
     chi2 = np.empty((m, P))

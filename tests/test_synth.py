@@ -15,7 +15,7 @@ from lidarfx.synth import GENERATORS, analytic_eigenvalues, catenary_z
 
 PI2 = math.pi**2
 
-# λ/R² of a uniform sample inside a sphere of radius R (spec §5), plus the corner and
+# λ/R² of a uniform sample inside a sphere of radius R (docs/conventions.md), plus the corner and
 # the line end derived the same way
 SPEC_EIGENVALUES = {
     "line": (1 / 3, 0.0, 0.0),

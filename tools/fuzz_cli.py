@@ -34,7 +34,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 if (SRC / "lidarfx").is_dir():
     sys.path.insert(0, str(SRC))
 
-import numpy as np
+import numpy as np  # noqa: E402  (after the path set-up above)
 
 ENV = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 BAD_FILES = ["missing.laz", "adir", "empty.laz", "garbage.laz", "trunc.laz", "hdr.xyz", "nan.xyz", "words.xyz",

@@ -3,12 +3,16 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from . import _numba_cache
-from .cloud import PointCloud
-from .errors import LidarfxError
-from .io import read, write
+from . import _numba_cache, _prebuilt
 
-_numba_cache.check()  # before any kernel loads (none of the above has one): numba misses edits in other files
+# before any module defines a kernel: numba misses edits in other files (check), and the shipped
+# kernels fix the processor numba compiles for (install)
+_numba_cache.check()
+_prebuilt.install()
+
+from .cloud import PointCloud  # noqa: E402
+from .errors import LidarfxError  # noqa: E402
+from .io import read, write  # noqa: E402
 
 __all__ = [
     "PointCloud",

@@ -1,4 +1,4 @@
-"""Structure lines (breaklines) of ALS terrain (seed 004, Mandlburger & Briese 2009; SPEC §6).
+"""Structure lines (breaklines) of ALS terrain (Mandlburger & Briese 2009; docs/breaklines.md).
 
 Steps of :func:`extract_breaklines`:
 
@@ -57,6 +57,7 @@ import numpy as np
 
 from .cloud import PointCloud
 from .errors import LidarfxError, check_int, check_number
+from .features.eigen import eigh3
 from .vector.polyline import Polyline
 
 __all__ = ["DEFAULTS", "Breaklines", "extract_breaklines", "line_distances"]
@@ -136,6 +137,27 @@ def _normal3(s, t, z, w):
 
 
 @nb.njit(cache=True)
+def _median(x):
+    """The median of a 1-D float array (NaN for none); numba's own np.median costs seconds to compile."""
+    n = len(x)
+    if n == 0:
+        return np.nan
+    v = np.sort(x)
+    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+
+
+@nb.njit(cache=True)
+def _cond3(n):
+    """Condition number λmax / λmin of a symmetric positive semi-definite 3×3 matrix (inf when singular)."""
+    lam = np.empty(3)
+    v = np.empty(3)
+    eigh3(n[0, 0], n[0, 1], n[0, 2], n[1, 1], n[1, 2], n[2, 2], lam, v, v, False)
+    if not lam[2] > 0.0:
+        return np.inf
+    return lam[0] / lam[2]
+
+
+@nb.njit(cache=True)
 def _robust_plane_kernel(s, t, z, sigma0, iterations):
     """The adjustment of :func:`_robust_plane`; ``ok`` False where it has no answer."""
     nz = len(z)
@@ -148,17 +170,17 @@ def _robust_plane_kernel(s, t, z, sigma0, iterations):
         return False, p, cov, np.inf, 0.0, 0.0
     for _ in range(iterations):
         n, b = _normal3(s, t, z, w)
-        if np.linalg.cond(n) > 1e10:
+        if _cond3(n) > 1e10:
             return False, p, cov, np.inf, 0.0, 0.0
-        p = np.linalg.solve(n, b)
+        _, p = _solve_small(n.copy(), b)
         for i in range(nz):
             r[i] = z[i] - (p[0] + p[1] * s[i] + p[2] * t[i])
-        med = np.median(r)
-        sig = max(sigma0, 1.4826 * np.median(np.abs(r - med)))
+        med = _median(r)
+        sig = max(sigma0, 1.4826 * _median(np.abs(r - med)))
         w = _kp_weights(r, sig)
     n, b = _normal3(s, t, z, w)
     ne = w.sum()
-    if ne < 3 or np.linalg.cond(n) > 1e10:
+    if ne < 3 or _cond3(n) > 1e10:
         return False, p, cov, np.inf, ne, 0.0
     wrr = 0.0
     kept_ss = 0.0
@@ -169,7 +191,11 @@ def _robust_plane_kernel(s, t, z, sigma0, iterations):
             kept_ss += r[i] * r[i]
             kept += 1
     s0 = max(np.sqrt(wrr / max(ne - 3.0, 1.0)), 1e-6)
-    cov = np.linalg.inv(n) * s0 * s0
+    for c in range(3):  # the inverse of n, a column at a time
+        e = np.zeros(3)
+        e[c] = 1.0
+        _, col = _solve_small(n.copy(), e)
+        cov[:, c] = col * (s0 * s0)
     rms = np.sqrt(kept_ss / kept) if kept else np.inf
     return True, p, cov, rms, ne, 1.0 - kept / nz
 
@@ -218,6 +244,19 @@ def _solve_small(a, b):
 
 
 @nb.njit(cache=True)
+def _bisect(a, x, right):
+    """np.searchsorted(a, x, "right" if right else "left") for a sorted 1-D ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < x or (right and a[mid] == x):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@nb.njit(cache=True)
 def _profile_kernel(s, t, z, w, k1, k2, middle):
     """Best knot pair of :func:`_profile_fits`: index (−1: none), parameters, residuals.
 
@@ -244,8 +283,8 @@ def _profile_kernel(s, t, z, w, k1, k2, middle):
     b = np.zeros(m)
     for j in range(len(k1)):
         ka, kc = k1[j], k2[j]
-        il = np.searchsorted(ss, ka, "left")  # s < k1: [0, il)
-        ir = np.searchsorted(ss, kc, "right")  # s > k2: [ir, n)
+        il = _bisect(ss, ka, False)  # s < k1: [0, il)
+        ir = _bisect(ss, kc, True)  # s > k2: [ir, n)
         left = pre[il]
         mid = pre[ir] - pre[il]
         right = tot - pre[ir]
@@ -746,14 +785,19 @@ def extract_breaklines(
     classes: Sequence[int] | None = DEFAULTS["classes"],
     approximations: Sequence[Any] | None = None,
     progress: bool | None = None,
+    units: str = "auto",
 ) -> Breaklines:
     """Structure lines of the terrain: 3-D lines where the slope breaks (module docstring).
 
     ``classes``: ground classes (default 2; the ground filter runs when the cloud has
     none of them; ``None`` = every point is ground).  ``approximations``: optional 2-D
     (or 3-D) polylines near the lines, used instead of the curvature start points.
-    The other parameters: :data:`DEFAULTS` and the docs.
+    The other parameters: :data:`DEFAULTS` and the docs.  ``units="auto"`` (default): the
+    lengths are metres (``min_curvature`` 1/m), converted when the LAS header's CRS names another
+    linear unit (US survey feet, feet); ``"native"``: coordinate units as given.  ``meta`` and
+    the lines' σ are in metres, the vertices in the cloud's coordinates.
     """
+    from .crs import metres_per_unit
     from .features import feature_arrays
     from .vector.lines import douglas_peucker
 
@@ -777,6 +821,13 @@ def extract_breaklines(
         min_curvature = check_number("min_curvature", min_curvature, 0.0, 1e6, open_lo=True)
     if max_rms is not None:
         max_rms = check_number("max_rms", max_rms, 0.0, 1e4, open_lo=True)
+    unit = metres_per_unit(cloud, units)
+    if unit != 1.0:  # metres -> coordinate units (curvatures 1/m -> 1/unit)
+        lengths = {k: (None if v is None else float(v) / unit, f, o) for k, (v, f, o) in lengths.items()}
+        min_length, simplify = min_length / unit, simplify / unit
+        radius = None if radius is None else radius / unit
+        max_rms = None if max_rms is None else max_rms / unit
+        min_curvature = None if min_curvature is None else min_curvature * unit
     approx = None
     if approximations is not None:
         approx = []
@@ -821,8 +872,8 @@ def extract_breaklines(
     kmin = np.where(big, k2, k1)
     ok = np.isfinite(kmax) & np.isfinite(kmin)
     ps = np.asarray(f["plane_std"], np.float64)
-    sigma0 = float(np.nanmedian(ps)) if np.isfinite(ps).any() else 0.05
-    sigma0 = max(sigma0, 0.005)
+    sigma0 = float(np.nanmedian(ps)) if np.isfinite(ps).any() else 0.05 / unit
+    sigma0 = max(sigma0, 0.005 / unit)
     if max_rms is None:  # a patch is one plane when it fits about as well as the ground's noise
         max_rms = 1.3 * sigma0
     if min_curvature is None:
@@ -835,7 +886,7 @@ def extract_breaklines(
     t2 = time.perf_counter()
 
     # 3. start points
-    model = _Model(g, prm, 0.5 * sigma0 if sigma0 > 0 else 0.01, max_rms, spacing)
+    model = _Model(g, prm, 0.5 * sigma0 if sigma0 > 0 else 0.01 / unit, max_rms, spacing)
     from scipy.spatial import cKDTree
 
     seeds: list[tuple[int, np.ndarray, np.ndarray]] = []  # (form, xy, u)
@@ -927,26 +978,30 @@ def extract_breaklines(
             v, support=pt["support"], rms=math.nan, kind="breakline",
             attrs={"form": "convex" if pt["form"] == 0 else "concave",
                    "mean_angle": round(float(pt["ang"].mean()), 3),
-                   "mean_sigma_xy": round(float(pt["sxy"].mean()), 4),
-                   "mean_sigma_z": round(float(pt["sz"].mean()), 4),
-                   "sigma_xy": [round(float(x), 4) for x in pt["sxy"][keep]],
-                   "sigma_z": [round(float(x), 4) for x in pt["sz"][keep]],
+                   "mean_sigma_xy": round(float(pt["sxy"].mean()) * unit, 4),
+                   "mean_sigma_z": round(float(pt["sz"].mean()) * unit, 4),
+                   "sigma_xy": [round(float(x) * unit, 4) for x in pt["sxy"][keep]],
+                   "sigma_z": [round(float(x) * unit, 4) for x in pt["sz"][keep]],
                    "angle": [round(float(x), 3) for x in pt["ang"][keep]]}))
     lines.sort(key=lambda ln: -ln.length_2d)
     t5 = time.perf_counter()
     meta = {
-        "points": n, "ground_points": int(len(gi)), "density": rho,
-        "parameters": {**prm, "radius": r, "min_curvature": float(min_curvature), "curvature_ratio": curvature_ratio,
-                       "max_rms": float(max_rms), "min_length": min_length, "join": join, "simplify": simplify,
+        "points": n, "ground_points": int(len(gi)), "density": rho / (unit * unit),
+        "lengths": "m" if units == "auto" else "coordinate units",
+        "unit_to_metre": unit if units == "auto" else None,
+        "parameters": {**{k: (v * unit if k in lengths else v) for k, v in prm.items()}, "radius": r * unit,
+                       "min_curvature": float(min_curvature) / unit, "curvature_ratio": curvature_ratio,
+                       "max_rms": float(max_rms) * unit, "min_length": min_length * unit, "join": join * unit,
+                       "simplify": simplify * unit,
                        "classes": None if classes is None else [int(c) for c in classes],
                        "approximations": None if approx is None else len(approx)},
-        "noise": sigma0,
+        "noise": sigma0 * unit,
         "start_points": int(start_mask.sum()) if approx is None else 0,
         "seeds_tried": tried,
         "parts": len(parts),
         "narrow_face_vertices": n_split,
         "lines": len(lines),
-        "total_length": float(sum(ln.length_2d for ln in lines)),
+        "total_length": float(sum(ln.length_2d for ln in lines)) * unit,
         "seconds": {"ground": round(t1 - t0, 3), "curvature": round(t2 - t1, 3), "start": round(t3 - t2, 3),
                     "grow": round(t4 - t3, 3), "post": round(t5 - t4, 3)},
     }

@@ -285,6 +285,7 @@ def colour_cloud(
     cmap: str = "viridis",
     value_range: tuple[float, float] | None = None,
     progress: bool | None = None,
+    units: str = "auto",
 ) -> PointCloud:
     """A copy of ``cloud`` with ``red``, ``green``, ``blue`` (uint16, round(c × 65535)) set from ``by``.
 
@@ -303,7 +304,9 @@ def colour_cloud(
 
     Existing colours are replaced.  ``meta["colour"]`` of the result records ``by`` and what was
     used (normal source and radius, sun, colormap and range, sets or classes with their points
-    and colours).
+    and colours).  ``radius`` is metres, converted when the LAS header's CRS names another linear
+    unit (US survey feet, feet; ``units="native"``: coordinate units); ``scanner`` is a position
+    in the cloud's coordinates.
     """
     if not isinstance(by, str) or not by:
         raise LidarfxError(f"'by' must be morphology, set, class or an attribute name, got {by!r}")
@@ -321,10 +324,13 @@ def colour_cloud(
             from .features import feature_arrays
             from .neighbors import default_radius
 
-            r = default_radius(cloud) if radius is None else radius
+            from .crs import metres_per_unit
+
+            u = metres_per_unit(cloud, units)
+            r = default_radius(cloud) if radius is None else radius / u  # coordinate units
             f = feature_arrays(cloud.xyz, list(NORMAL_NAMES), radius=r, scanner=scanner, progress=progress)
             normals = np.column_stack([np.asarray(f[k], dtype=np.float64) for k in NORMAL_NAMES])
-            meta.update(normals="computed", radius=r, radius_source="auto" if radius is None else "given",
+            meta.update(normals="computed", radius=r * u, radius_source="auto" if radius is None else "given",
                         scanner=None if scanner is None else [float(v) for v in scanner])
         rgb = morphology_rgb(normals, sun_azimuth=az, sun_altitude=alt)
         no_normal = ~np.all(np.isfinite(normals), axis=1) | ~np.any(normals != 0, axis=1)

@@ -145,7 +145,7 @@ def rockface_scene(out: Path, seed: int = 1) -> DemoScene:
 def powerline_scene(out: Path, seed: int = 0) -> DemoScene:
     """Power lines of a synthetic corridor: conductors, wire points and catenaries against the truth."""
     from . import io, synth
-    from .ground.dtm import cloud_crs
+    from .crs import cloud_crs
     from .powerlines import extract_powerlines
     from .powerlines.output import conductor_polylines, write_tables
     from .render import powerline_view
@@ -205,7 +205,7 @@ def house_scene(out: Path, seed: int = 0) -> DemoScene:
     """3-D edge lines of a synthetic house against its true ridge, eave and verge lines."""
     from . import io, synth
     from .edges import extract_edges
-    from .ground.dtm import cloud_crs
+    from .crs import cloud_crs
     from .render import lines_view
     from .vector import export_lines
 
@@ -240,7 +240,8 @@ def dike_scene(out: Path, seed: int = 0) -> DemoScene:
     """Breaklines of a synthetic ALS tile with a dike and a ditch against the true lines."""
     from . import io, synth
     from .breaklines import extract_breaklines, line_distances
-    from .ground.dtm import cloud_crs, dtm
+    from .crs import cloud_crs
+    from .ground.dtm import dtm
     from .render import breakline_view
     from .vector import export_lines
 

@@ -1,4 +1,4 @@
-"""3-D building edge lines from the structure classes (doc 002, SPEC §5 third bullet).
+"""3-D building edge lines from the structure classes (after ISPRS 2016; docs/edges.md).
 
 The points the unsupervised structure classification labels *plane border*,
 *edge* or *corner* (:func:`lidarfx.classify_structures`) form bands a few point
@@ -135,6 +135,7 @@ def extract_edges(
     simplify: float | None = None,
     seed: int = 0,
     progress: bool | None = None,
+    units: str = "auto",
 ) -> EdgeLines:
     """3-D edge lines of a point cloud (module docstring for the steps).
 
@@ -143,7 +144,7 @@ def extract_edges(
     cloud:
         The point cloud.
     radius:
-        Radius of the structure classification and of the placement (coordinate units).
+        Radius of the structure classification and of the placement (m).
         Default: :func:`lidarfx.structures.default_radius`.
     labels:
         Structure labels whose points are candidates (default: plane_border, edge, corner).
@@ -153,7 +154,7 @@ def extract_edges(
     references:
         References of the classification (see :func:`lidarfx.classify_structures`).
     link, threshold, max_gap, join, simplify, plane_threshold, min_length:
-        Lengths in coordinate units: link distance of the components (default 0.5 r),
+        Lengths (m): link distance of the components (default 0.5 r),
         RANSAC inlier distance (0.5 r), largest gap along a segment (3 ×
         threshold), largest distance of two segment ends that are joined (r),
         Douglas–Peucker tolerance (0.1 r), plane inlier distance of the
@@ -170,7 +171,12 @@ def extract_edges(
         Largest angle (degrees) between collinear segments that are merged.
     seed:
         Seed of the RANSAC draws (results are deterministic).
+    units:
+        ``"auto"`` (default): the radius and the lengths are metres, converted when the LAS
+        header's CRS names another linear unit (US survey feet, feet); ``"native"``: coordinate
+        units as given.  ``meta`` gives them in metres; the lines are in the cloud's coordinates.
     """
+    from .crs import metres_per_unit
     from .segment.components import linked_components
     from .structures import LABELS, classify_structures, default_radius
 
@@ -190,19 +196,20 @@ def extract_edges(
     if use_structure and "structure" not in cloud:
         raise LidarfxError("the cloud has no 'structure' attribute; run lidarfx eigenclass first or classify here")
     t0 = time.perf_counter()
-    r = _length("radius", radius, 0.0) if radius is not None else default_radius(cloud)
-    link = _length("link", link, FACTORS["link"] * r)
-    threshold = _length("threshold", threshold, FACTORS["threshold"] * r)
-    max_gap = _length("max_gap", max_gap, 3.0 * threshold)
-    join = _length("join", join, FACTORS["join"] * r)
-    simplify = _length("simplify", simplify, FACTORS["simplify"] * r)
-    plane_threshold = _length("plane_threshold", plane_threshold, FACTORS["plane_threshold"] * r)
-    min_length = _length("min_length", min_length, FACTORS["min_length"] * r)
+    u = metres_per_unit(cloud, units)  # lengths in metres -> coordinate units (defaults are already)
+    r = _length("radius", radius, 0.0) / u if radius is not None else default_radius(cloud)
+    link = _length("link", link, FACTORS["link"] * r * u) / u
+    threshold = _length("threshold", threshold, FACTORS["threshold"] * r * u) / u
+    max_gap = _length("max_gap", max_gap, 3.0 * threshold * u) / u
+    join = _length("join", join, FACTORS["join"] * r * u) / u
+    simplify = _length("simplify", simplify, FACTORS["simplify"] * r * u) / u
+    plane_threshold = _length("plane_threshold", plane_threshold, FACTORS["plane_threshold"] * r * u) / u
+    min_length = _length("min_length", min_length, FACTORS["min_length"] * r * u) / u
 
     if use_structure:
         work = PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
     else:
-        work = classify_structures(cloud, r, references=references, progress=progress)
+        work = classify_structures(cloud, r, references=references, progress=progress, units="native")
     t1 = time.perf_counter()
     struct = np.asarray(work["structure"]).astype(np.int64)
     is_cand = np.isin(struct, [names[lab] for lab in labels])
@@ -270,10 +277,13 @@ def extract_edges(
         s.end = s.end + origin
     t4 = time.perf_counter()
     meta = {
-        "radius": r,
+        "radius": r * u,
         "labels": list(labels),
-        "parameters": {"link": link, "threshold": threshold, "max_gap": max_gap, "join": join, "simplify": simplify,
-                       "plane_threshold": plane_threshold, "min_length": min_length, "min_points": min_points,
+        "lengths": "m" if units == "auto" else "coordinate units",
+        "unit_to_metre": u if units == "auto" else None,
+        "parameters": {"link": link * u, "threshold": threshold * u, "max_gap": max_gap * u, "join": join * u,
+                       "simplify": simplify * u, "plane_threshold": plane_threshold * u,
+                       "min_length": min_length * u, "min_points": min_points,
                        "merge_angle": float(merge_angle), "refine": bool(refine),
                        "keep_unrefined": bool(keep_unrefined), "keep_cloud_border": bool(keep_cloud_border), "seed": seed},
         "candidates": int(len(cand_ids)),
@@ -282,7 +292,7 @@ def extract_edges(
         "refined_segments": refined,
         "merged_segments": len(merged),
         "lines": len(lines),
-        "total_length": round(float(sum(p.length for p in lines)), 3),
+        "total_length": round(float(sum(p.length for p in lines)) * u, 3),
         "seconds": {"classify": round(t1 - t0, 3), "segments": round(t2 - t1, 3), "refine": round(t3 - t2, 3),
                     "polylines": round(t4 - t3, 3)},
     }

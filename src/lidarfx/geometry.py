@@ -1,6 +1,6 @@
 """Geometry shared by every module: orientations, frames, plane fits.
 
-Conventions (SPEC §1, §6): x = East, y = North, z = Up; angles in degrees.
+Conventions (docs/conventions.md): x = East, y = North, z = Up; angles in degrees.
 Dip = angle of the plane from horizontal, dip direction = azimuth (clockwise
 from North) of the down-dip direction, strike = dip direction − 90° (right-hand
 rule).  Normals are flipped up before converting.

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from . import _parallel as parallel
 from .errors import LidarfxError
 
 __all__ = ["NeighborIndex", "Grid", "default_cell_for_knn", "default_radius", "check_grid"]
@@ -179,67 +180,65 @@ def ring_buffer_size(radius_max: float, cell: float) -> int:
 # ----------------------------------------------------------------------------
 # kernels
 # ----------------------------------------------------------------------------
-@nb.njit(cache=True, parallel=True)
-def _radius_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf, collect, offsets, out_idx, out_d):
-    """Count the neighbours of each query; with ``collect`` also write them (sorted-order
-    indices and distances) into the CSR arrays at ``offsets``."""
-    m = q.shape[0]
-    counts = np.zeros(m, np.int64)
-    nchunk = (m + 1023) // 1024
-    for ch in nb.prange(nchunk):
-        lo = np.empty(nbuf, np.int64)
-        hi = np.empty(nbuf, np.int64)
-        for i in range(ch * 1024, min(m, ch * 1024 + 1024)):
-            qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
-            r = radius[i] if radius.shape[0] > 1 else radius[0]
-            r2 = r * r
-            zh = zhalf if cylinder else r
-            nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
-            w = offsets[i] if collect else 0
-            cnt = 0
-            for k in range(nr):
-                for j in range(lo[k], hi[k]):
-                    dx = pts[j, 0] - qx
-                    dy = pts[j, 1] - qy
-                    d2 = dx * dx + dy * dy
-                    if not cylinder:
-                        dz = pts[j, 2] - qz
-                        d2 += dz * dz
-                    if d2 <= r2:
-                        if collect:
-                            out_idx[w + cnt] = j
-                            out_d[w + cnt] = math.sqrt(d2)
-                        cnt += 1
-            counts[i] = cnt
-    return counts
+@nb.njit(cache=True, nogil=True)
+def _radius_kernel(lo_q, hi_q, pts, cstart, cend, ckey, table, nx, ny, cell, q, radius, cylinder, zhalf, nbuf,
+                   collect, offsets, out_idx, out_d, counts):
+    """Count the neighbours of queries ``lo_q:hi_q`` into ``counts``; with ``collect`` also
+    write them (sorted-order indices and distances) into the CSR arrays at ``offsets``."""
+    lo = np.empty(nbuf, np.int64)
+    hi = np.empty(nbuf, np.int64)
+    for i in range(lo_q, hi_q):
+        qx, qy, qz = q[i, 0], q[i, 1], q[i, 2]
+        r = radius[i] if radius.shape[0] > 1 else radius[0]
+        r2 = r * r
+        zh = zhalf if cylinder else r
+        nr = column_ranges(pts, cstart, cend, ckey, table, nx, ny, cell, qx, qy, qz, r, zh, lo, hi)
+        w = offsets[i] if collect else 0
+        cnt = 0
+        for k in range(nr):
+            for j in range(lo[k], hi[k]):
+                dx = pts[j, 0] - qx
+                dy = pts[j, 1] - qy
+                d2 = dx * dx + dy * dy
+                if not cylinder:
+                    dz = pts[j, 2] - qz
+                    d2 += dz * dz
+                if d2 <= r2:
+                    if collect:
+                        out_idx[w + cnt] = j
+                        out_d[w + cnt] = math.sqrt(d2)
+                    cnt += 1
+        counts[i] = cnt
+
+
+@nb.njit(cache=True, inline="always")
+def _sift_down(hd, hi_, size, d2, j):
+    """Put (d2, j) at the root of the max-heap of ``size`` entries and sift it down."""
+    pos = 0
+    while True:
+        c = 2 * pos + 1
+        if c >= size:
+            break
+        if c + 1 < size and hd[c + 1] > hd[c]:
+            c += 1
+        if hd[c] <= d2:
+            break
+        hd[pos] = hd[c]
+        hi_[pos] = hi_[c]
+        pos = c
+    hd[pos] = d2
+    hi_[pos] = j
 
 
 @nb.njit(cache=True, inline="always")
 def _heap_push(hd, hi_, size, k, d2, j):
     """Max-heap of the k best (smallest d2).  Returns the new size."""
-    if size < k:
-        pos = size
-        size += 1
-    elif d2 < hd[0]:
-        # replace root and sift down
-        pos = 0
-        while True:
-            c = 2 * pos + 1
-            if c >= size:
-                break
-            if c + 1 < size and hd[c + 1] > hd[c]:
-                c += 1
-            if hd[c] <= d2:
-                break
-            hd[pos] = hd[c]
-            hi_[pos] = hi_[c]
-            pos = c
-        hd[pos] = d2
-        hi_[pos] = j
+    if size == k:
+        if d2 < hd[0]:  # replace the root (the worst kept)
+            _sift_down(hd, hi_, size, d2, j)
         return size
-    else:
-        return size
-    # sift up for an insertion at pos
+    # insert at the end and sift up
+    pos = size
     while pos > 0:
         p = (pos - 1) >> 1
         if hd[p] >= d2:
@@ -249,14 +248,22 @@ def _heap_push(hd, hi_, size, k, d2, j):
         pos = p
     hd[pos] = d2
     hi_[pos] = j
-    return size
+    return size + 1
+
+
+@nb.njit(cache=True, inline="always")
+def _heap_pop(hd, hi_, size):
+    """Remove the root of the max-heap of ``size`` entries (its last entry sifts down)."""
+    _sift_down(hd, hi_, size - 1, hd[size - 1], hi_[size - 1])
 
 
 @nb.njit(cache=True, parallel=True)
 def _knn_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, k, rmax, out_idx, out_d):
     """k nearest neighbours (3-D) by rings of columns; ``rmax`` caps the search (inf = none).
 
-    Rows with fewer than k neighbours inside ``rmax`` are padded with -1 / inf.
+    Rows with fewer than k neighbours inside ``rmax`` are padded with -1 / inf.  The one kernel
+    still compiled with numba's ``parallel=True`` (and called from Python only): the same loop as
+    a ``nogil`` kernel on threads (lidarfx._parallel) ran three times slower per query.
     """
     m = q.shape[0]
     nchunk = (m + 255) // 256
@@ -330,11 +337,11 @@ def _knn_kernel(pts, cstart, cend, ckey, table, nx, ny, cell, q, k, rmax, out_id
                     break
                 if ring > maxring:
                     break
-            # heap -> sorted ascending
-            order = np.argsort(hd[:size])
-            for t in range(size):
-                out_idx[i, t] = hj[order[t]]
-                out_d[i, t] = math.sqrt(hd[order[t]])
+            # heap -> ascending: take the largest off the max-heap, from the back
+            for t in range(size - 1, -1, -1):
+                out_idx[i, t] = hj[0]
+                out_d[i, t] = math.sqrt(hd[0])
+                _heap_pop(hd, hj, t + 1)
             for t in range(size, k):
                 out_idx[i, t] = -1
                 out_d[i, t] = np.inf
@@ -348,10 +355,7 @@ def _counting_sort(key, z, ncells):
     """Order by column key (counting sort, O(n)).  Returns the order, the z values in
     that order and the run starts; :func:`_sort_runs_by_z` then sorts each run by z.
 
-    The caller runs :func:`_sort_runs_by_z` itself: a cached non-parallel kernel that
-    calls a ``parallel=True`` one segfaults when it is loaded from numba's disk cache
-    (numba issue #8578; seen here on a one-point cloud, whose z column is C-contiguous).
-    No kernel of lidarfx calls a parallel kernel (tests/test_numba_cache.py checks it)."""
+    The caller runs :func:`_sort_runs_by_z` over the runs on threads (:mod:`lidarfx._parallel`)."""
     n = key.shape[0]
     start = np.zeros(ncells + 1, np.int64)
     for i in range(n):
@@ -369,22 +373,58 @@ def _counting_sort(key, z, ncells):
     return order, zs, start
 
 
-@nb.njit(cache=True, parallel=True)
-def _sort_runs_by_z(order, zs, start):
-    """Sort each run [start[c], start[c+1]) by ``zs`` (the z values in run order),
-    carrying ``order`` along: insertion sort for short runs, merge sort otherwise."""
-    nc = start.shape[0] - 1
-    for c in nb.prange(nc):
+@nb.njit(cache=True)
+def _merge_sort_run(zs, order, a, b):
+    """Stable sort of ``zs[a:b]`` carrying ``order[a:b]`` along (bottom-up merge sort)."""
+    n = b - a
+    za = zs[a:b].copy()
+    oa = order[a:b].copy()
+    zb = np.empty(n)
+    ob = np.empty(n, order.dtype)
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid = min(lo + width, n)
+            hi = min(lo + 2 * width, n)
+            i, j, t = lo, mid, lo
+            while i < mid and j < hi:
+                if za[j] < za[i]:
+                    zb[t] = za[j]
+                    ob[t] = oa[j]
+                    j += 1
+                else:
+                    zb[t] = za[i]
+                    ob[t] = oa[i]
+                    i += 1
+                t += 1
+            while i < mid:
+                zb[t] = za[i]
+                ob[t] = oa[i]
+                i += 1
+                t += 1
+            while j < hi:
+                zb[t] = za[j]
+                ob[t] = oa[j]
+                j += 1
+                t += 1
+        za, zb = zb, za
+        oa, ob = ob, oa
+        width *= 2
+    zs[a:b] = za
+    order[a:b] = oa
+
+
+@nb.njit(cache=True, nogil=True)
+def _sort_runs_by_z(lo_c, hi_c, order, zs, start):
+    """Sort runs ``lo_c:hi_c`` (run c is [start[c], start[c+1])) by ``zs`` (the z values in run
+    order), carrying ``order`` along: insertion sort for short runs, merge sort otherwise."""
+    for c in range(lo_c, hi_c):
         a = start[c]
         b = start[c + 1]
         if b - a <= 1:
             continue
         if b - a > 48:
-            o = np.argsort(zs[a:b], kind="mergesort")
-            seg = order[a:b][o]
-            zz = zs[a:b][o]
-            order[a:b] = seg
-            zs[a:b] = zz
+            _merge_sort_run(zs, order, a, b)
             continue
         for t in range(a + 1, b):
             v = order[t]
@@ -410,17 +450,15 @@ def _column_keys(xyz, origin, cell, ny):
     return key
 
 
-@nb.njit(cache=True, parallel=True)
-def _sorted_local(xyz, origin, order):
-    """The points in index order, made local: xyz[order] - origin, without temporaries."""
-    n = order.shape[0]
-    pts = np.empty((n, 3))
-    for i in nb.prange(n):
+@nb.njit(cache=True, nogil=True)
+def _sorted_local(lo, hi, xyz, origin, order, pts):
+    """Rows ``lo:hi`` of the points in index order, made local: pts = xyz[order] - origin,
+    without temporaries."""
+    for i in range(lo, hi):
         j = order[i]
         pts[i, 0] = xyz[j, 0] - origin[0]
         pts[i, 1] = xyz[j, 1] - origin[1]
         pts[i, 2] = xyz[j, 2] - origin[2]
-    return pts
 
 
 MAX_GRID_CELLS = 2**62
@@ -457,7 +495,7 @@ def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
     dense = ncells <= 4 * n + 4096
     if dense:
         order, zs, start = _counting_sort(key, xyz[:, 2], ncells)
-        _sort_runs_by_z(order, zs, start)  # z order = local z order
+        parallel.run(_sort_runs_by_z, ncells, order, zs, start, grain=4096)  # z order = local z order
         del zs, start
     else:
         # sparse grid (huge extent for the cell size): sort by z, then stably by column
@@ -479,7 +517,8 @@ def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
         table[ckey] = np.arange(ckey.shape[0], dtype=np.int64)
     else:
         table = np.zeros(0, np.int64)
-    pts = _sorted_local(xyz, origin, order)
+    pts = np.empty((n, 3))
+    parallel.run(_sorted_local, n, xyz, origin, order, pts, grain=65536)
     return pts, order, cstart, cend, ckey, table, nx, ny
 
 
@@ -552,10 +591,14 @@ class NeighborIndex:
         nbuf = ring_buffer_size(float(r.max(initial=0)), g.cell)
         if offsets is None:
             empty = np.zeros(0, np.int64)
-            return _radius_kernel(*g, ql, r, cylinder, zhalf, nbuf, False, empty, empty, np.zeros(0))
+            counts = np.zeros(len(ql), np.int64)
+            parallel.run(_radius_kernel, len(ql), *g, ql, r, cylinder, zhalf, nbuf, False, empty, empty,
+                         np.zeros(0), counts, grain=1024)
+            return counts
         idx = np.empty(offsets[-1], np.int64)
         dist = np.empty(offsets[-1], np.float64)
-        _radius_kernel(*g, ql, r, cylinder, zhalf, nbuf, True, offsets, idx, dist)
+        parallel.run(_radius_kernel, len(ql), *g, ql, r, cylinder, zhalf, nbuf, True, offsets, idx, dist,
+                     np.zeros(len(ql), np.int64), grain=1024)
         return idx, dist
 
     def query_radius(self, q: np.ndarray, radius, cylinder: bool = False, height: float | None = None):

@@ -38,7 +38,7 @@ ATTRIBUTES = ("section_s", "section_h", "section_d")
 """The attributes a section adds: along, height, offset (m)."""
 
 MAX_WIDTH = 1e6
-"""Largest slab width (coordinate units)."""
+"""Largest slab width (m)."""
 
 _BLOCK = 1 << 20
 """Points per block of the slab test (bounds the temporaries)."""
@@ -46,7 +46,8 @@ _BLOCK = 1 << 20
 
 @dataclass(frozen=True)
 class SectionFrame:
-    """A cut: origin ``a``, unit axes ``along`` (s), ``up`` (h), ``normal`` (d), ``length`` and ``width``."""
+    """A cut: origin ``a``, unit axes ``along`` (s), ``up`` (h), ``normal`` (d), ``length`` and ``width``
+    (coordinate units, as the origin), ``unit`` (metres per coordinate unit)."""
 
     origin: np.ndarray
     along: np.ndarray
@@ -55,15 +56,16 @@ class SectionFrame:
     length: float
     width: float
     vertical: bool
+    unit: float = 1.0
 
     def describe(self) -> dict[str, Any]:
-        """JSON-ready facts of the frame."""
+        """JSON-ready facts of the frame: the origin in coordinates, length and width in metres."""
         def r(v):
             return [round(float(t), 9) for t in v]
 
         return {"origin": [float(t) for t in self.origin], "along": r(self.along), "up": r(self.up),
-                "normal": r(self.normal), "length": float(self.length), "width": float(self.width),
-                "vertical": self.vertical}
+                "normal": r(self.normal), "length": float(self.length) * self.unit,
+                "width": float(self.width) * self.unit, "vertical": self.vertical, "unit_to_metre": self.unit}
 
 
 def _point(name: str, value) -> np.ndarray:
@@ -76,11 +78,12 @@ def _point(name: str, value) -> np.ndarray:
     return v
 
 
-def section_frame(start, end, width: float, normal=None) -> SectionFrame:
-    """The frame of a section from ``start`` to ``end`` (x, y[, z]) of slab ``width``, vertical or
-    with the cut plane's ``normal`` (see the module docstring); one-line errors for a zero
-    width, equal ends, a zero normal or one parallel to the line."""
-    width = check_number("width", width, 0.0, MAX_WIDTH, open_lo=True)
+def section_frame(start, end, width: float, normal=None, *, unit: float = 1.0) -> SectionFrame:
+    """The frame of a section from ``start`` to ``end`` (x, y[, z], coordinates) of slab ``width``
+    (m), vertical or with the cut plane's ``normal`` (see the module docstring); one-line errors
+    for a zero width, equal ends, a zero normal or one parallel to the line.  ``unit``: metres per
+    coordinate unit of the cloud (:func:`lidarfx.crs.unit_to_metre`), which converts the width."""
+    width = check_number("width", width, 0.0, MAX_WIDTH, open_lo=True) / unit
     a, b = _point("from", start), _point("to", end)
     if normal is None:
         t = b[:2] - a[:2]
@@ -90,7 +93,7 @@ def section_frame(start, end, width: float, normal=None) -> SectionFrame:
         along = np.array([t[0] / length, t[1] / length, 0.0])
         up = np.array([0.0, 0.0, 1.0])
         origin = np.array([a[0], a[1], a[2] if a.size == 3 else 0.0])
-        return SectionFrame(origin, along, up, np.cross(along, up), length, width, True)
+        return SectionFrame(origin, along, up, np.cross(along, up), length, width, True, unit)
     n = _point("normal", normal)
     if n.size != 3:
         raise LidarfxError(f"normal must be 3 finite numbers nx,ny,nz, got {normal!r}")
@@ -113,7 +116,7 @@ def section_frame(start, end, width: float, normal=None) -> SectionFrame:
     up = np.cross(n, along)
     if up[2] < 0:
         up = -up
-    return SectionFrame(a, along, up, n, length, width, False)
+    return SectionFrame(a, along, up, n, length, width, False, unit)
 
 
 def section_coordinates(xyz: np.ndarray, frame: SectionFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -144,10 +147,15 @@ def section_indices(xyz: np.ndarray, start, end, width: float, normal=None):
     return (idx, *section_coordinates(xyz[idx], frame))
 
 
-def section(cloud: PointCloud, start, end, width: float, normal=None) -> PointCloud:
+def section(cloud: PointCloud, start, end, width: float, normal=None, *, units: str = "auto") -> PointCloud:
     """The points of ``cloud`` in the slab, with their attributes and ``section_s``,
-    ``section_h``, ``section_d`` (float64); ``meta["section"]`` describes the frame."""
-    frame = section_frame(start, end, width, normal)
+    ``section_h``, ``section_d`` (float64, coordinate units); ``meta["section"]`` describes the
+    frame.  ``width`` is metres, converted when the LAS header's CRS names another linear unit
+    (US survey feet, feet; ``units="native"``: coordinate units); ``start``, ``end`` are
+    coordinates."""
+    from .crs import metres_per_unit
+
+    frame = section_frame(start, end, width, normal, unit=metres_per_unit(cloud, units))
     return cut_section(cloud, frame)
 
 
@@ -164,8 +172,10 @@ def cut_section(cloud: PointCloud, frame: SectionFrame) -> PointCloud:
 def read_near_section(path: str | os.PathLike, frame: SectionFrame, margin: float = 0.0, *,
                       columns: Sequence[str] | None = None, progress: bool | None = None) -> PointCloud:
     """The points of a file within the slab widened by ``margin`` (e.g. a feature radius, so
-    the slab points have all their neighbours).  LAS/LAZ files are read in chunks and only
-    these points are kept; other formats are read whole."""
+    the slab points have all their neighbours; m, converted by ``frame.unit`` as the width).
+    LAS/LAZ files are read in chunks and only these points are kept; other formats are read
+    whole."""
+    margin = float(margin) / frame.unit
     from . import io
     from .io import las
 

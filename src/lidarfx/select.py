@@ -1,4 +1,4 @@
-"""Selection by criteria: a safe, vectorised expression over point attributes (SPEC §4).
+"""Selection by criteria: a safe, vectorised expression over point attributes (docs/segmentation.md §5).
 
 >>> import lidarfx
 >>> from lidarfx.select import evaluate, select

@@ -255,11 +255,17 @@ def thin_indices(xyz: np.ndarray, cell: float, keep: str = "centre", seed: int =
     return w.indices()
 
 
-def thin_cloud(cloud: PointCloud | np.ndarray, cell: float, keep: str = "centre", seed: int = 0) -> np.ndarray:
+def thin_cloud(cloud: PointCloud | np.ndarray, cell: float, keep: str = "centre", seed: int = 0, *,
+               units: str = "auto") -> np.ndarray:
     """Indices (ascending) of the points of ``cloud`` (a :class:`PointCloud` or an (n, 3) array)
-    that block thinning keeps; ``cloud.subset(idx)`` is the thinned cloud."""
-    xyz = cloud.xyz if isinstance(cloud, PointCloud) else cloud
-    return thin_indices(xyz, cell, keep, seed)
+    that block thinning keeps; ``cloud.subset(idx)`` is the thinned cloud.  ``cell`` is metres,
+    converted when the cloud's LAS CRS is in feet (``units="native"``: coordinate units; an
+    array is in coordinate units)."""
+    from .crs import length_to_units
+
+    if isinstance(cloud, PointCloud):
+        return thin_indices(cloud.xyz, length_to_units(cloud, check_cell(cell), units), keep, seed)
+    return thin_indices(cloud, cell, keep, seed)
 
 
 # --------------------------------------------------------------------------- files
@@ -275,7 +281,7 @@ def _pass(src: Path, chunk_points: int, advance: Callable[[int], None]):
 def _bar(description: str, total: int, progress: bool | None):
     from .progress import bar, wanted
 
-    return bar(description, total, wanted(progress, total))
+    return bar(description, total, wanted(progress))
 
 
 def _scan_bounds(src: Path, chunk_points: int, progress: bool | None, total: int) -> tuple[np.ndarray, np.ndarray]:
@@ -352,6 +358,7 @@ def thin_file(
     chunk_points: int = CHUNK_POINTS,
     record_budget: int = RECORD_BUDGET,
     progress: bool | None = None,
+    units: str = "auto",
 ) -> dict[str, Any]:
     """Block-thin the file ``src`` into ``dst`` (see the module docstring); returns a summary.
 
@@ -360,13 +367,16 @@ def thin_file(
     records bit for bit (same point format, scales, offsets, VLRs and CRS), other outputs the
     kept points with all their attributes.  Other inputs (``columns``: the text column spec)
     are read in memory.  ``dst`` is written to a temporary file and renamed at the end; it
-    may not be ``src``.
+    may not be ``src``.  ``cell`` is metres, converted to the file's unit when its CRS is in
+    feet (``units="native"``: in coordinate units as given); the summary gives it in metres.
     """
     from . import io
     from ._atomic import atomic_path, check_not_same_file
+    from .crs import check_units, length_to_units, units_summary
     from .io import las
 
     cell = check_cell(cell)
+    check_units(units)
     keep = check_keep(keep)
     seed = check_seed(seed)
     chunk_points = check_int("chunk_points", chunk_points, 1, 1 << 30)
@@ -379,7 +389,8 @@ def thin_file(
     if fmt != "las":
         cloud = io.read(src, columns=columns, progress=progress)
         n = len(cloud)
-        idx = thin_cloud(cloud, cell, keep, seed)
+        unit = units_summary(cloud if units == "auto" else None)
+        idx = thin_cloud(cloud, cell, keep, seed, units=units)
         t1 = time.perf_counter()
         io.write(cloud.subset(idx), dst, progress=progress)
         kept = len(idx)
@@ -393,7 +404,9 @@ def thin_file(
             from .io import _one_line
 
             raise LidarfxError(f"cannot read {src}: {_one_line(exc)}") from exc
-        idx, rows, n, facts = _winners_of_file(src, header, cell, keep, seed, chunk_points, progress,
+        unit = units_summary(header if units == "auto" else None)
+        idx, rows, n, facts = _winners_of_file(src, header, check_cell(length_to_units(header, cell, units)), keep,
+                                               seed, chunk_points, progress,
                                                check_int("record_budget", record_budget, 0, 1 << 50))
         t1 = time.perf_counter()
         kept = len(idx)
@@ -424,6 +437,7 @@ def thin_file(
         "kept": int(kept),
         "share_kept": round(kept / n, 6) if n else None,
         "cell": cell,
+        "units": unit,
         "keep": keep,
         **({"seed": seed} if keep == "random" else {}),
         "grid": "cells [i c, (i+1) c) per axis, anchored at (0, 0, 0)",

@@ -1,4 +1,4 @@
-"""Supervised point classification (SPEC §5, seed 001).
+"""Supervised point classification (docs/classification.md; after Lang, docs/conventions.md#sources).
 
 Public API
 ----------

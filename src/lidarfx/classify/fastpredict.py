@@ -17,16 +17,18 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .. import _parallel as parallel
+
 BLOCK = 256
 
 
-@nb.njit(cache=True, parallel=True)
-def _raw_scores(X, feature, threshold, missing_left, left, right, is_leaf, value, roots, tree_class, base):
+@nb.njit(cache=True, nogil=True)
+def _raw_scores(lo, hi, X, feature, threshold, missing_left, left, right, is_leaf, value, roots, tree_class, base,
+                out):
+    """Raw scores of blocks ``lo:hi`` (of BLOCK rows) of ``X`` into ``out``."""
     n = X.shape[0]
     k_out = base.shape[0]
-    out = np.empty((n, k_out))
-    n_blocks = (n + BLOCK - 1) // BLOCK
-    for b in nb.prange(n_blocks):
+    for b in range(lo, hi):
         s = b * BLOCK
         e = min(n, s + BLOCK)
         for i in range(s, e):
@@ -45,6 +47,12 @@ def _raw_scores(X, feature, threshold, missing_left, left, right, is_leaf, value
                         go_left = x <= threshold[node]
                     node = left[node] if go_left else right[node]
                 out[i, k] += value[node]
+
+
+def raw_scores(X: np.ndarray, arrays: tuple, base: np.ndarray) -> np.ndarray:
+    """Summed leaf values of every tree for the rows of ``X``, blocks of rows on threads."""
+    out = np.empty((X.shape[0], base.shape[0]))
+    parallel.run(_raw_scores, (X.shape[0] + BLOCK - 1) // BLOCK, X, *arrays, base, out, grain=4)
     return out
 
 
@@ -87,7 +95,7 @@ class FastBoosting:
         X = np.ascontiguousarray(X)
         if X.ndim != 2 or X.shape[1] != self.n_features:
             raise ValueError(f"expected {self.n_features} feature columns, got shape {X.shape}")
-        return _raw_scores(X, *self.arrays, self.base)
+        return raw_scores(X, self.arrays, self.base)
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         return self.loss.predict_proba(self.raw(X))

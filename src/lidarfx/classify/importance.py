@@ -18,6 +18,10 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import LidarfxError
+from .fastpredict import fast_estimator
+from .folds import fold_parts
+from .metrics import confusion_matrix, metrics
+from .pipeline import balanced_sample
 
 __all__ = ["impurity_importance", "permutation_importance", "backward_elimination"]
 
@@ -47,8 +51,6 @@ def impurity_importance(estimator: Any, names: Sequence[str] | None = None) -> l
 def _fast_scorer(estimator: Any, scoring: Any) -> Any:
     """``scoring`` as a callable predicting through :mod:`.fastpredict` (same predictions,
     4x faster for boosting); unchanged for other estimators and scorers."""
-    from .fastpredict import fast_estimator
-
     if scoring not in ("f1_macro", "accuracy"):
         return scoring
     fast = fast_estimator(estimator)
@@ -110,16 +112,13 @@ def backward_elimination(
     ``max(1, step · n)`` features with the lowest impurity importance (forest
     trained on all folds).  Stops at ``min_features``.  ``exclude``: points left
     out of each fold's training part (a buffered block CV,
-    :func:`lidarfx.classify.evaluate.block_buffer_mask`).
+    :func:`lidarfx.classify.folds.block_buffer_mask`).
 
     Returns ``{"steps": [{"n_features", "oa", "mean_f1", "features", "removed"}...],
     "best": <the smallest step whose mean F1 is within tolerance of the best>}``.
     """
     from sklearn.ensemble import RandomForestClassifier
     from sklearn.utils.class_weight import compute_sample_weight
-
-    from .evaluate import confusion_matrix, fold_parts, metrics
-    from .pipeline import balanced_sample
 
     X = np.asarray(X, dtype=np.float32)
     y = np.asarray(y)

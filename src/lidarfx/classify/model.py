@@ -24,11 +24,13 @@ from .. import __version__
 from .._json import jsonable
 from ..cloud import PointCloud
 from ..errors import LidarfxError, LidarfxWarning, check_seed
+from ..progress import stage, wanted
 from .classes import DEFAULT_IGNORE, ClassMap
 from .pipeline import (
     DEFAULT_HAG_CAP,
     DEFAULT_MAX_DISC_POINTS,
     DEFAULT_RADII,
+    RETURN_INPUTS,
     CloudSample,
     LidarFeatures,
     balanced_sample,
@@ -36,14 +38,17 @@ from .pipeline import (
     make_classifier,
     make_imputer,
     point_density,
+    point_spacing,
     pulse_thinning_mask,
+    return_information,
+    spacing_radii,
     terrain_shear,
     unit_to_metre,
     usable_mask,
 )
 
-__all__ = ["TrainConfig", "ClassifierModel", "train", "load_model", "read_sources", "Source",
-           "FORMAT", "FORMAT_VERSION", "TRUSTED_TYPES"]
+__all__ = ["TrainConfig", "ClassifierModel", "train", "load_model", "read_sources", "Source", "resolve_defaults",
+           "model_path", "DEFAULT_MODEL", "FORMAT", "FORMAT_VERSION", "TRUSTED_TYPES"]
 
 FORMAT = "lidarfx-classifier"
 FORMAT_VERSION = 1
@@ -75,14 +80,19 @@ TRUSTED_TYPES: tuple[str, ...] = (
 
 DEFAULT_MAX_PER_CLASS = 20_000
 
+#: the model shipped with lidarfx (``--model default``): the default pipeline trained on the three
+#: IGN LiDAR HD tiles (ground / vegetation / building); its card is docs/default-model.md, its
+#: build script benchmarks/build_default_model.py
+DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "default.skops"
+
 #: predicted-building clusters with a smaller plan footprint (m²) are given their next most
-#: probable class (:mod:`.objects`); chosen on the training tiles (docs/classification-record.md §6.13).
+#: probable class (:mod:`.objects`); chosen on the training tiles (docs/classification-record.md §7).
 #: Part of the ALS default: with a feature list of one's own (e.g. TLS) the rule is off unless asked for
 DEFAULT_MIN_BUILDING_AREA = 10.0
 
 #: a predicted-building cluster of at least that area in which more than this share of the points
 #: come from multi-return pulses is given its next class (see-through test;
-#: docs/classification-record.md §6.16); 1 = no test.  Acts only together with the minimum area above
+#: docs/classification-record.md §8); 1 = no test.  Acts only together with the minimum area above
 DEFAULT_MAX_MULTI_RETURN_SHARE = 0.5
 
 #: prediction computes and classifies the features of this many points at a time: the feature
@@ -113,7 +123,10 @@ class TrainConfig:
     """Everything that defines a model before it sees data (stored in the model file).
 
     ``radii`` None: 1, 2 and 3 m for spheres and cylinders, none for kNN (whose one radius
-    would only cap the neighbour distance)."""
+    would only cap the neighbour distance); for spheres and cylinders ``auto_radii`` is then
+    True and :func:`train` replaces them by radii from the training files' point spacing
+    (:func:`resolve_defaults`: 1, 2, 3 m for ALS, smaller for denser clouds).  A stored model's
+    ``auto_radii`` says its radii were derived that way."""
 
     features: list[str] | None = None
     radii: list[float] | None = None
@@ -135,12 +148,16 @@ class TrainConfig:
     n_jobs: int | None = None
     min_building_area: float | None = None
     max_multi_return_share: float = DEFAULT_MAX_MULTI_RETURN_SHARE
+    auto_radii: bool | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.features, str):
             self.features = [f.strip() for f in self.features.split(",") if f.strip()]
         elif self.features is not None:
             self.features = [str(f) for f in self.features]
+        if self.auto_radii is None:  # the radii were not given: derived from the point spacing at training
+            self.auto_radii = self.radii is None and self.neighbourhood != "knn" and not self.precomputed
+        self.auto_radii = bool(self.auto_radii)
         if self.radii is None:
             self.radii = [] if self.neighbourhood == "knn" else list(DEFAULT_RADII)
         self.radii = sorted(set(float(r) for r in self.radii))
@@ -205,7 +222,7 @@ class TrainConfig:
     def feature_names(self) -> list[str]:
         return feature_list(self.features, self.radii, self.neighbourhood, self.k)[0]
 
-    def fit_matrix(self, X: np.ndarray, y: np.ndarray):
+    def fit_matrix(self, X: np.ndarray, y: np.ndarray, progress: bool | None = None):
         """Fit NaN handling + classifier on a feature matrix (class-balanced by sample weights)."""
         from sklearn.pipeline import Pipeline
         from sklearn.utils.class_weight import compute_sample_weight
@@ -218,7 +235,7 @@ class TrainConfig:
         w = compute_sample_weight("balanced", y) if self.balance else None
         if w is not None and np.allclose(w, w[0]):
             w = None  # a balanced sample needs no weights (and weights double the boosting time)
-        with _fit_threads(self):
+        with _fit_threads(self), stage(f"fitting {self.classifier} on {len(y):,} points", wanted(progress)):
             tail.fit(X, y, classifier__sample_weight=w)
         return tail
 
@@ -330,7 +347,8 @@ def warn_unusable(cloud: PointCloud, mask: np.ndarray, name: str) -> None:
                       "they are neither training points nor classified", LidarfxWarning, stacklevel=3)
 
 
-def _labels(src: Source, classes: ClassMap) -> np.ndarray:
+def source_labels(src: Source, classes: ClassMap) -> np.ndarray:
+    """Class index of every point of ``src`` in ``classes`` (−1: not in the map)."""
     if "classification" not in src.cloud:
         raise LidarfxError(f"{src.name} has no classification: training and evaluation need labelled points")
     return classes.index_of(src.cloud["classification"])
@@ -425,6 +443,8 @@ class ClassifierModel:
             "training_density": self.training_density,
             "training_counts": tr.get("counts", {}).get("used", {}),
             "training_seconds": tr.get("seconds", {}),
+            "defaults": {k: v for k, v in ((self.meta.get("training", {}).get("defaults") or {}).items()) if v},
+            "card": self.meta.get("card"),
             "lidarfx_version": self.meta.get("lidarfx_version"),
             "sklearn_version": self.meta.get("sklearn_version"),
             "created": self.meta.get("created"),
@@ -653,7 +673,10 @@ class ClassifierModel:
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model with skops (atomic)."""
+        """Write the model with skops (atomic; the zip members deflated: a boosting model's node
+        arrays shrink to about a third)."""
+        import zipfile
+
         import skops.io as sio
 
         from .._atomic import atomic_path
@@ -670,7 +693,7 @@ class ClassifierModel:
         }
         p = Path(path)
         with atomic_path(p) as tmp:
-            sio.dump(obj, tmp)
+            sio.dump(obj, tmp, compression=zipfile.ZIP_DEFLATED, compresslevel=9)
         return p
 
     @classmethod
@@ -714,8 +737,22 @@ def untrusted_types(path: str | os.PathLike) -> list[str]:
     return sorted(t for t in file_types(path) if t not in TRUSTED_TYPES)
 
 
+def model_path(path: str | os.PathLike) -> Path:
+    """The file of a model name: ``"default"`` is the model shipped with lidarfx
+    (:data:`DEFAULT_MODEL`; a file called ``default`` is ``./default``), anything else a path."""
+    if str(path) == "default":
+        if not DEFAULT_MODEL.is_file():
+            raise LidarfxError(f"the default model is not installed ({DEFAULT_MODEL} is missing); rebuild it with "
+                               "python benchmarks/build_default_model.py, or give a model file")
+        return DEFAULT_MODEL
+    return Path(path)
+
+
 def load_model(path: str | os.PathLike) -> ClassifierModel:
     """Load a model saved by :meth:`ClassifierModel.save` without executing code.
+
+    ``path`` ``"default"`` loads the model shipped with lidarfx (:func:`model_path`,
+    docs/default-model.md).
 
     The types named in the file are listed first; if any is not in
     :data:`TRUSTED_TYPES` the file is refused (:class:`LidarfxError`) and
@@ -728,7 +765,7 @@ def load_model(path: str | os.PathLike) -> ClassifierModel:
     from sklearn.naive_bayes import GaussianNB
     from sklearn.pipeline import Pipeline
 
-    p = Path(path)
+    p = model_path(path)
     if not p.is_file():
         raise LidarfxError(f"model file not found: {p}")
     bad = untrusted_types(p)
@@ -786,7 +823,8 @@ AUGMENT_SHARE = 0.5
 """Training points drawn per class from each terrain-sheared copy, relative to ``max_per_class``."""
 
 
-def _aug_cap(cfg: TrainConfig) -> int | None:
+def augment_cap(cfg: TrainConfig) -> int | None:
+    """Training points drawn per class from each augmented copy (None: all)."""
     return None if cfg.max_per_class is None else max(1, int(cfg.max_per_class * AUGMENT_SHARE))
 
 
@@ -820,7 +858,7 @@ def thinned_sources(srcs: list[Source], cfg: TrainConfig) -> list[list[tuple[Sou
 def labelled_sample(sources: list[Source], classes: ClassMap, max_per_class: int | None, seed: int
                     ) -> tuple[list[CloudSample], np.ndarray, dict[str, Any]]:
     """Balanced training sample over all sources: (samples, y, per-class counts)."""
-    ys = [_labels(s, classes) for s in sources]
+    ys = [source_labels(s, classes) for s in sources]
     y_all = np.concatenate(ys) if ys else np.zeros(0, np.int16)
     pick = balanced_sample(y_all, max_per_class, seed)
     bounds = np.cumsum([0] + [len(y) for y in ys])
@@ -844,6 +882,61 @@ def labelled_sample(sources: list[Source], classes: ClassMap, max_per_class: int
         raise LidarfxError(f"no training points of {', '.join(repr(m) for m in missing)} (the usable points "
                            f"hold the classes {sorted(present) or 'none'}; check --classes)")
     return samples, y.astype(np.int64), counts
+
+
+def resolve_defaults(config: TrainConfig, sources: list[Source], log: Callable[[str], None] | None = None
+                     ) -> tuple[TrainConfig, dict[str, Any]]:
+    """The configuration :func:`train` uses on these training files: ``config`` with its defaults
+    fitted to the data, and what was done (``{"returns": …, "spacing": …}``, stored in the model).
+
+    * **Return numbers.** With the default feature list (``features`` None), when a training file
+      has no return numbers (fields missing or 0 in every point: TLS / MLS scans, AHN4 exports) or
+      no file has more than one return per pulse (every point 1 of 1), the list becomes
+      ``default,-return_ratio,-number_of_returns``: those inputs cannot be computed, or would be
+      constant.  One line to ``log`` (without ``log``: a :class:`LidarfxWarning`).  A list given
+      explicitly is never changed (a missing field is refused with a hint, as before).
+    * **Radii.** With radii not given (``auto_radii``), the radii come from the point spacing of the
+      sparsest training file (:func:`~lidarfx.classify.pipeline.point_spacing`, usable points, metres):
+      :func:`~lidarfx.classify.pipeline.spacing_radii` — 1, 2, 3 m for ALS (spacing ≥ 0.16 m), r, 2r, 3r
+      for denser clouds with r the radius of a disc holding 125 points.  One line to ``log``.
+    """
+    import dataclasses
+
+    notes: dict[str, Any] = {"returns": None, "spacing": None}
+    cfg = config
+    if cfg.features is None:
+        info = {s.name: return_information(s.cloud) for s in sources}
+        lacking = [n for n, v in info.items() if v == "none"]
+        if lacking or not any(v == "multi" for v in info.values()):
+            spec = ["default"] + ["-" + n for n in RETURN_INPUTS]
+            cfg = dataclasses.replace(cfg, features=spec)
+            named = lacking or list(info)
+            what = ("no return numbers (fields missing or 0 in every point)" if lacking
+                    else "only single returns (every point 1 of 1)")
+            msg = (f"{what} in {', '.join(named[:3])}{f' and {len(named) - 3} more' if len(named) > 3 else ''}: "
+                   f"the default features leave out {', '.join(RETURN_INPUTS)} (--features {','.join(spec)})")
+            notes["returns"] = {"files": info, "features": spec, "note": msg}
+            if log is not None:
+                log("note: " + msg)
+            else:
+                warnings.warn(msg, LidarfxWarning, stacklevel=3)
+    if cfg.auto_radii and cfg.neighbourhood != "knn" and not cfg.precomputed:
+        spacing = {}
+        for s in sources:
+            u = unit_to_metre(s.cloud)
+            spacing[s.name] = round(point_spacing(s.cloud.xyz if u == 1.0 else s.cloud.xyz * u), 4)
+        sparsest = max(spacing, key=spacing.get)
+        radii = spacing_radii(spacing[sparsest])
+        if radii != list(cfg.radii):
+            cfg = dataclasses.replace(cfg, radii=radii, auto_radii=True)
+        notes["spacing"] = {"files": spacing, "spacing": spacing[sparsest], "file": sparsest, "radii": list(cfg.radii),
+                            "rule": "1, 2, 3 m unless a 1 m disc holds more than 125 points at the sparsest training "
+                                    "file's spacing; then r, 2r, 3r with r the radius of a disc holding 125"}
+        if log is not None:
+            log(f"radii {', '.join(f'{r:g}' for r in cfg.radii)} m from the point spacing "
+                f"({spacing[sparsest]:.3g} m{f', {sparsest}' if len(spacing) > 1 else ''}"
+                + ("; the ALS radii" if list(cfg.radii) == list(DEFAULT_RADII) else "") + ")")
+    return cfg, notes
 
 
 def train(
@@ -883,6 +976,7 @@ def train(
     say = log or (lambda msg: None)
     srcs = read_sources(sources, progress=progress)
     cmap = resolve_classes(srcs, classes, ignore)
+    cfg, defaults = resolve_defaults(cfg, srcs, log)
     samples, y, counts = labelled_sample(srcs, cmap, cfg.max_per_class, cfg.seed)
     say(f"training sample: {len(y):,} points from {len(srcs)} file(s): "
         + ", ".join(f"{k} {v:,}" for k, v in counts["used"].items()))
@@ -890,14 +984,14 @@ def train(
     t1 = time.perf_counter()
     X = tr.transform(samples)
     for a, copies in enumerate(sheared_sources(srcs, cfg)):
-        s2, y2, c2 = labelled_sample(copies, cmap, _aug_cap(cfg), cfg.seed + 1 + a)
+        s2, y2, c2 = labelled_sample(copies, cmap, augment_cap(cfg), cfg.seed + 1 + a)
         X = np.vstack([X, tr.transform(s2)])
         y = np.concatenate([y, y2])
         for name, v in c2["used"].items():
             counts["used"][name] += v
         counts.setdefault("terrain_augment", []).append(c2["used"])
     for b, copies in enumerate(thinned_sources(srcs, cfg)):
-        s3, y3, c3 = labelled_sample([c for c, _ in copies], cmap, _aug_cap(cfg),
+        s3, y3, c3 = labelled_sample([c for c, _ in copies], cmap, augment_cap(cfg),
                                      cfg.seed + 1 + cfg.terrain_augment + b)  # the seeds evaluate uses
         X = np.vstack([X, tr.transform(s3)])
         y = np.concatenate([y, y3])
@@ -910,7 +1004,7 @@ def train(
            if cfg.terrain_augment else "")
         + (f" (incl. copies thinned to {', '.join(f'{f:g}' for f in cfg.density_augment)} of the density)"
            if cfg.density_augment else ""))
-    tail = cfg.fit_matrix(X, y)
+    tail = cfg.fit_matrix(X, y, progress)
     t3 = time.perf_counter()
     say(f"fit {cfg.classifier}: {t3 - t2:.1f} s")
     from sklearn.pipeline import Pipeline
@@ -928,6 +1022,7 @@ def train(
             "density": round(min(cloud_density(s.cloud) for s in srcs), 2),
             "counts": counts,
             "seconds": {"read": round(t1 - t0, 3), "features": round(t2 - t1, 3), "fit": round(t3 - t2, 3)},
+            "defaults": defaults,
         },
         "lidarfx_version": __version__,
         "sklearn_version": _sklearn_version(),

@@ -8,14 +8,14 @@ point, the most probable of the other classes.  A component that reaches the edg
 of the classified data (within :data:`EDGE_RING` cells of :data:`EDGE_CELL` m of
 an empty cell or of the data's bounding box) is kept whatever its size: a building
 cut by a tile edge cannot be measured.  docs/classification.md §2,
-docs/classification-record.md §6.13.
+docs/classification-record.md §7.
 
 A component large enough to be judged (footprint at least the minimum area) in
 which more than a given share of the points come from pulses with several
 returns also takes its next class: a roof stops the laser, a tree crown lets it
 through (the default share, 0.5, is
 :data:`lidarfx.classify.model.DEFAULT_MAX_MULTI_RETURN_SHARE`;
-docs/classification-record.md §6.16).  Clouds without ``number_of_returns`` are not tested.
+docs/classification-record.md §8).  Clouds without ``number_of_returns`` are not tested.
 
 Clouds sparser than the default's link can bridge (mean spacing above half of
 it) get a longer link and larger edge cells: ``max(LINK, 2 / √density)``.

@@ -27,8 +27,9 @@ import numba as nb
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
+from .. import _parallel as parallel
 from ..cloud import PointCloud, measurement_flags
-from ..errors import LidarfxError, LidarfxWarning, check_seed
+from ..errors import LidarfxError, LidarfxWarning
 from ..features.api import check_options, radii_list, scale_suffix
 from ..features import slots as S
 from ..ground.dtm import unit_to_metre
@@ -45,6 +46,11 @@ __all__ = [
     "usable_mask",
     "balanced_sample",
     "feature_list",
+    "RETURN_INPUTS",
+    "SPACING_DISC_POINTS",
+    "return_information",
+    "point_spacing",
+    "spacing_radii",
     "unit_to_metre",
     "pulse_ids",
     "pulse_heights",
@@ -86,6 +92,63 @@ DEFAULT_HAG_CAP = 5.0
 #: neighbour clouds are thinned at random so that a disc of the smallest radius holds at most this
 #: many points on average (125 ≈ 40 points/m² at r = 1 m; TLS radii of 0.1 m allow 4 000 points/m²)
 DEFAULT_MAX_DISC_POINTS = 125.0
+
+#: the return inputs of the default list: left out of the default when a training file records no
+#: return numbers (TLS, MLS: no fields, 0 in every point, or every point 1 of 1), see
+#: :func:`return_information` and ``lidarfx.classify.model.resolve_defaults``
+RETURN_INPUTS: tuple[str, ...] = ("return_ratio", "number_of_returns")
+
+#: default radii from the point spacing: the smallest radius is that of a disc holding this many
+#: points on a surface sampled at the training files' spacing (the thinning's 125: at the ALS design
+#: density of 40 pts/m² that is the 1 m of :data:`DEFAULT_RADII`)
+SPACING_DISC_POINTS = 125.0
+
+
+def return_information(cloud: PointCloud) -> str:
+    """What the cloud's return numbers say (usable points, :func:`usable_mask`): ``"none"`` (a field
+    missing, or 0 in every point: AHN4 exports, LAS files written from TLS / MLS scans; the return
+    inputs cannot be computed), ``"single"`` (every point 1 of 1: the return inputs would be
+    constant) or ``"multi"``."""
+    if not all(_has_field(cloud, f) for f in ("return_number", "number_of_returns")):
+        return "none"
+    ok = usable_mask(cloud)
+    rn = np.asarray(cloud["return_number"])[ok]
+    nr = np.asarray(cloud["number_of_returns"])[ok]
+    return "single" if np.all(rn == 1) and np.all(nr == 1) else "multi"
+
+
+def point_spacing(xyz: np.ndarray, *, sample: int = 10_000, seed: int = 0) -> float:
+    """Mean point spacing (m) on the surfaces of a cloud: ``1 / √ρ`` with ρ the points per m² of a
+    surface, from the median distance d₂₀ to the 20th nearest neighbour over a seeded sample of at
+    most ``sample`` points (on a plane d₂₀ = √(20 / (π ρ))).  3-D, so vertical surfaces (facades,
+    poles) count as they are scanned; coordinates in metres."""
+    from ..neighbors import NeighborIndex, default_cell_for_knn
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if len(xyz) < 21:
+        raise LidarfxError("fewer than 21 points: cannot measure the point spacing; give the radii (-r)")
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(xyz), size=min(sample, len(xyz)), replace=False)
+    index = NeighborIndex(xyz, default_cell_for_knn(xyz - xyz.min(axis=0), 21))
+    _, d = index.knn(xyz[pick], 21)  # the point itself and 20 neighbours
+    d20 = d[:, -1]
+    d20 = d20[np.isfinite(d20) & (d20 > 0)]
+    if not len(d20):
+        raise LidarfxError("cannot measure the point spacing: the points coincide; give the radii (-r)")
+    return float(np.median(d20)) * math.sqrt(math.pi / 20.0)
+
+
+def spacing_radii(spacing: float) -> list[float]:
+    """The default radii for a point spacing (m): :data:`DEFAULT_RADII` (1, 2, 3 m) unless a disc of
+    1 m holds more than :data:`SPACING_DISC_POINTS` points at that spacing (spacing below 0.16 m,
+    denser than about 40 pts/m² on a surface: dense ALS, MLS, TLS); then r, 2r, 3r with r the radius of a
+    disc holding that many points, to the centimetre (at least 1 cm).  Never larger than the ALS
+    radii: those were validated on the IGN tiles, larger ones for sparse clouds were not."""
+    r = math.sqrt(SPACING_DISC_POINTS / math.pi) * float(spacing)
+    if not r < DEFAULT_RADII[0]:
+        return list(DEFAULT_RADII)
+    r1 = max(0.01, round(r, 2))
+    return [round(f * r1, 2) for f in (1, 2, 3)]
 
 #: per-point inputs that are not neighbourhood features (no radius suffix)
 EXTRA_INPUTS: dict[str, str] = {
@@ -390,6 +453,42 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                     + (f", the cloud has {', '.join(have)}" if have else "")
                     + f" — compute them with: {self.features_command()} (or predict without --precomputed)"
                 )
+            bad = int(np.count_nonzero(~usable_mask(cloud))) if len(cloud) else 0
+            if bad:  # a plain predict drops them before the features (ClassifierModel.predict)
+                warnings.warn(
+                    f"{name}: {bad:,} virtual, withheld or synthetic points are in no neighbourhood of a plain "
+                    "predict, but features written by lidarfx features have them as neighbours, so the precomputed "
+                    "features are not the ones a plain predict computes and some points may get another class",
+                    LidarfxWarning, stacklevel=3)
+
+    def thinning_limit(self, rs: Sequence[float] | None = None) -> tuple[float | None, int]:
+        """``(limit, min_keep)``: the density (points per m²) above which the neighbour cloud is
+        thinned (``max_disc_points`` per disc of the smallest radius ``rs[0]``; None: never) and
+        the fewest points a thinned neighbour cloud keeps (:func:`thinning_mask`)."""
+        if rs is None:
+            rs = self._plan()[3]
+        limit = None
+        if self.max_disc_points is not None and rs:
+            limit = float(self.max_disc_points) / (math.pi * rs[0] * rs[0])  # float: no OverflowError
+        # 0 for absurd radii: no thinning; never fewer points than one disc should hold
+        return (limit if limit else None), int(min(self.max_disc_points or 0, 1e9))
+
+    def _warn_unthinned(self, cloud: PointCloud, rs: Sequence[float], name: str) -> None:
+        """With ``precomputed``: warn when a plain prediction would thin ``cloud``'s neighbours
+        (``lidarfx features`` never thins, so the file's features are not the model's)."""
+        limit, min_keep = self.thinning_limit(rs)
+        if limit is None or not len(cloud):
+            return
+        xyz = cloud.xyz * unit_to_metre(cloud)
+        if thinning_mask(xyz, limit, min_keep=min_keep) is None:
+            return
+        warnings.warn(
+            f"{name}: {point_density(xyz):.1f} points/m² is denser than the {limit:.1f} points/m² to which the "
+            f"model thins its neighbour clouds ({self.max_disc_points:g} points per disc of {rs[0]:g} m); "
+            "features written by lidarfx features have every point as a neighbour, so the precomputed features "
+            "are not the ones a plain predict computes and some points get another class (docs/classification.md "
+            "§4); predict without --precomputed for the model's own features",
+            LidarfxWarning, stacklevel=4)
 
     def features_command(self) -> str:
         """The ``lidarfx features`` command that writes every neighbourhood feature this transformer
@@ -436,6 +535,10 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
             self._hag(cloud, unit, cache)  # first: its triangulation is the peak, before the index exists
         if slots and m:
             if self.precomputed:
+                key = ("unthinned", id(cloud))
+                if key not in cache and sample.ids is None:  # once per cloud; a chunk of a larger one
+                    cache[key] = True  # (lidarfx.tiles, ids given) does not know the whole cloud's density
+                    self._warn_unthinned(cloud, rs, sample.name)
                 for n in names:
                     if n in EXTRA_INPUTS or n in _NEEDS:
                         continue
@@ -448,12 +551,8 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
                 xyz = cache[key]
                 key = ("thin", id(cloud))
                 if key not in cache:
-                    limit = None
-                    if self.max_disc_points is not None and rs:
-                        limit = float(self.max_disc_points) / (math.pi * rs[0] * rs[0])  # float: no OverflowError
-                    # 0 for absurd radii: no thinning; never fewer points than one disc should hold
-                    cache[key] = thinning_mask(xyz, limit if limit else None,
-                                               min_keep=int(min(self.max_disc_points or 0, 1e9)))
+                    limit, min_keep = self.thinning_limit(rs)
+                    cache[key] = thinning_mask(xyz, limit, min_keep=min_keep)
                 keep = cache[key]
                 req = Request(tuple(slots), ())
                 held = cache.get("index")
@@ -538,12 +637,12 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         return _rows(out)
 
 
-@nb.njit(parallel=True, cache=True)
-def _transpose_blocks(cols: np.ndarray, out: np.ndarray) -> None:
-    k, m = cols.shape
-    for b in nb.prange((m + 1023) // 1024):  # 1024 rows at a time: the block stays in cache
+@nb.njit(cache=True, nogil=True)
+def _transpose_blocks(lo, hi, cols: np.ndarray, out: np.ndarray) -> None:
+    k = cols.shape[0]
+    for b in range(lo, hi):  # 1024 rows at a time: the block stays in cache
         for j in range(k):
-            for i in range(b * 1024, min(b * 1024 + 1024, m)):
+            for i in range(b * 1024, min(b * 1024 + 1024, cols.shape[1])):
                 out[i, j] = cols[j, i]
 
 
@@ -553,7 +652,7 @@ def _rows(cols: np.ndarray) -> np.ndarray:
     columns here, against 0.1 s for contiguous rows plus this blocked transpose)."""
     out = np.empty((cols.shape[1], cols.shape[0]), dtype=cols.dtype)
     if out.size:
-        _transpose_blocks(cols, out)
+        parallel.run(_transpose_blocks, (cols.shape[1] + 1023) // 1024, cols, out, grain=16)
     return out
 
 

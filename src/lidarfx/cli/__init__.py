@@ -35,6 +35,9 @@ EPILOG = """examples:
   lidarfx render scan.laz scan.png --by class --view top      # a picture: z-buffered splats, eye-dome lighting
   lidarfx report scan.laz report/ -r 0.5                    # an HTML page with a 3-D viewer of the cloud
   lidarfx edges roofs.laz lines.geojson --report report/    # any analysis command: its run as an HTML page
+
+units: lengths are metres; files in feet are converted (radii, distances, cells, widths, chunk
+sizes, buffers); positions such as --scanner or --from are the file's coordinates.
 """
 
 
@@ -82,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
             _default_show(message, category, filename, lineno, file, line)
 
     warnings.showwarning = _show
+    from .. import _numba_cache
+
+    _numba_cache.announce_compiles()
     try:
         rc = args.func(args)
     except LidarfxError as exc:

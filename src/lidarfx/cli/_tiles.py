@@ -9,17 +9,18 @@ TILE_HELP = """chunks (docs/scaling.md): INPUT may also be a folder of LAS/LAZ t
 quoted pattern ("tiles/*.laz"); OUTPUT a .las/.laz file, or a folder that gets
 one file per input tile, in the input's order.  Large inputs run in chunks
 with a buffer on Dask; where the algorithm is local every point's result
-equals the in-memory run's (docs/scaling.md says which and by how much)."""
+equals the in-memory run's (docs/scaling.md says which and by how much).
+--chunk-size and --buffer are metres, converted for inputs in feet."""
 
 
 def add_tile_options(p) -> None:
     """``--chunk-size``, ``--buffer``, ``--workers``, ``--scheduler``, ``--resume``, ``--work-dir``."""
     g = p.add_argument_group("chunks (inputs larger than memory; docs/scaling.md)")
     g.add_argument("--chunk-size", type=float, default=None, metavar="SIZE",
-                   help="side of the square chunks in coordinate units (m for metre data); 0 = all in memory "
+                   help="side of the square chunks, m; 0 = all in memory "
                         "(default: in memory when the input fits, else chosen from its density and the free memory)")
     g.add_argument("--buffer", type=float, default=None, metavar="SIZE",
-                   help="how far around each chunk points are read, in coordinate units (default: what the "
+                   help="how far around each chunk points are read, m (default: what the "
                         "command's neighbourhoods reach)")
     g.add_argument("--workers", type=int, default=None, metavar="N", help="parallel chunks (default: one per core)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",

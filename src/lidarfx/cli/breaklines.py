@@ -46,7 +46,8 @@ def register(sub) -> None:
     p = sub.add_parser(
         "breaklines",
         help="3-D terrain structure lines (dike crests and toes, ditch and bank edges) with sigma per vertex",
-        description="Extract structure lines (breaklines) from ALS ground points (seed 004, SPEC §6).",
+        description="Extract structure lines (breaklines) from ALS ground points (after Mandlburger & Briese 2009). "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -122,7 +123,7 @@ def run(args) -> int:
     from .._tables import write_csv_rows
     from ..breaklines import extract_breaklines
     from ..errors import LidarfxError
-    from ..ground.dtm import cloud_crs
+    from ..crs import cloud_crs
     from ..vector import export_lines
 
     out = Path(args.output)
@@ -158,8 +159,11 @@ def run(args) -> int:
         from ..ground.dtm import dtm
         from ..render import breakline_view
 
-        spacing = (1.0 / max(res.meta["density"], 1e-9)) ** 0.5
-        raster = dtm(cloud.xyz[res.ground], resolution=float(f"{max(0.5, 2.0 * spacing):.2g}"))
+        from ..crs import unit_to_metre
+
+        spacing = (1.0 / max(res.meta["density"], 1e-9)) ** 0.5  # m
+        cell = float(f"{max(0.5, 2.0 * spacing):.2g}") / unit_to_metre(cloud)  # the DTM of an array: map units
+        raster = dtm(cloud.xyz[res.ground], resolution=cell)
         breakline_view(raster, res.lines, picture,
                        title=f"{Path(args.input).name}: {len(res.lines)} structure lines, {res.meta['total_length']:,.0f} m")
         if args.picture:

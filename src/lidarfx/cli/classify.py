@@ -24,7 +24,7 @@ EPILOG = """examples:
   # a trained model on labelled files; what a model file holds
   lidarfx classify evaluate other1.laz other2.laz --model als.skops --out eval_test
   lidarfx classify info als.skops
-  # Lang (seed 001): random forest vs naive Bayes on a TLS facade, multi-scale 0.1/0.3/0.5 m
+  # Lang's facade experiment: random forest vs naive Bayes on a TLS facade, multi-scale 0.1/0.3/0.5 m
   lidarfx synth facade facade.laz --seed 1
   #   (TLS: no thinning, no terrain augmentation, normals towards the scanner)
   lidarfx classify evaluate facade.laz --classifier nb \\
@@ -36,7 +36,13 @@ defaults: gradient boosting (--classifier hgb), features = the ALS default list
 (eigen, plane, slope-adaptive echo ratio, histogram, distribution at 1, 2 and
 3 m; return_ratio, number_of_returns, height_above_ground capped at 5 m), at most
 20 000 training points per class plus 10 000 per class from one terrain-sheared
-copy of the training files, class-balanced.  Metrics: OA, kappa, per class PA
+copy of the training files, class-balanced.  The defaults adapt to the training
+files and say so: without return numbers (TLS, MLS) the two return inputs are
+left out, and for clouds denser than ALS (point spacing below 0.16 m) the radii
+are r, 2r, 3r with r from the measured spacing (a disc of r holds 125 points);
+both are recorded in the model.  --model default (predict, evaluate, info) is
+the model shipped with lidarfx, trained on three IGN LiDAR HD tiles
+(docs/default-model.md).  Metrics: OA, kappa, per class PA
 (producer's accuracy = recall), UA (user's accuracy = precision), F1, IoU,
 support, with 95 % intervals of OA, kappa and mean F1 from a bootstrap of
 20 m blocks; confusion matrix rows = reference, columns = predicted.
@@ -48,6 +54,7 @@ sparser clouds).  See docs/classification.md.
 
 TRAIN_EPILOG = """examples:
   lidarfx classify train a.laz b.laz --model m.skops --classes 2,3+4+5,6
+  lidarfx classify train scan.laz model.skops   # the model as the last file; defaults fitted to the scan
   lidarfx classify train a.laz --model m.skops --classes ground=2,vegetation=3+4+5:5,building=6 \\
       --classifier rf --features eigen,height -r 0.5 -r 1 --max-per-class 50000
   # a model for clouds sparser than the training files (copies with 1/2, 1/4, 1/8 of the pulses)
@@ -81,11 +88,17 @@ def _add_train_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("-f", "--features", default=None,
                    help="comma-separated feature groups / names, plus height_above_ground, number_of_returns, "
                         "return_number, intensity, intensity_norm, z, pulse_above, pulse_below "
-                        "(default: the ALS list of docs/classification.md §6); 'default' is that list and -NAME takes "
-                        "a group or name out of what came before it, e.g. default,-return_ratio,-number_of_returns "
-                        "for files without return numbers")
+                        "(default: the ALS list of docs/classification.md §6; when a training file has no return "
+                        "numbers (none, all 0, or every point 1 of 1: TLS, MLS) the default leaves out return_ratio "
+                        "and number_of_returns and says so); 'default' is that list and -NAME takes "
+                        "a group or name out of what came before it, e.g. default,-return_ratio,-number_of_returns")
     g.add_argument("-r", "--radius", type=float, action="append", default=None,
-                   help="neighbourhood radius in m (repeat for multi-scale; default 1, 2, 3)")
+                   help="neighbourhood radius in m (repeat for multi-scale). Default: from the measured point "
+                        "spacing of the sparsest training file (median distance to the 20th neighbour): 1, 2, 3 m "
+                        "for ALS (spacing 0.16 m or more, up to about 40 pts/m²); for denser clouds (MLS, TLS, "
+                        "dense ALS) r, 2r, 3r with r the radius of a disc holding 125 points at that spacing, e.g. "
+                        "0.32, 0.64, 0.96 m at a 5 cm spacing. The radii and the spacing are recorded in the model "
+                        "(classify info --json)")
     g.add_argument("--classes", default=None,
                    help="class map: 2,3+4+5,6 (merge with +, name with ground=2; unlisted classes are ignored); "
                         "default: every class found except 0, 1, 7, 18")
@@ -154,7 +167,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "classify",
         help="supervised classification: train, predict, evaluate",
-        description="Supervised point classification (SPEC §5): train a model on labelled clouds, "
+        description="Supervised point classification: train a model on labelled clouds, "
                     "classify new clouds, evaluate with random and spatial-block cross-validation.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -164,8 +177,9 @@ def register(sub) -> None:
     t = cs.add_parser("train", help="train a model on labelled files", epilog=TRAIN_EPILOG,
                       description="Train a point classifier on labelled point clouds and save it (skops).",
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    t.add_argument("files", nargs="+", help="labelled training clouds")
-    t.add_argument("-m", "--model", required=True, help="output model file (.skops)")
+    t.add_argument("files", nargs="+", metavar="FILE",
+                   help="labelled training clouds; the last one may be the output model (.skops) instead of --model")
+    t.add_argument("-m", "--model", default=None, help="output model file (.skops)")
     _add_train_options(t)
     add_columns(t)
     _add_common(t)
@@ -177,7 +191,9 @@ def register(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     pr.add_argument("input", help="input point cloud")
     pr.add_argument("output", help="output point cloud (format from the extension)")
-    pr.add_argument("-m", "--model", required=True, help="model file written by 'lidarfx classify train'")
+    pr.add_argument("-m", "--model", required=True,
+                    help="model file written by 'lidarfx classify train', or 'default': the model shipped with "
+                         "lidarfx (ground / vegetation / building, trained on IGN LiDAR HD; docs/default-model.md)")
     pr.add_argument("--confidence", action="store_true", help="add a float32 'confidence' attribute (top probability)")
     pr.add_argument("--probabilities", action="store_true",
                     help="add one float32 attribute per class, probability_<class name>: the classifier's "
@@ -205,7 +221,7 @@ def register(sub) -> None:
                                   "densities, sample counts and versions (loaded safely, nothing is executed).",
                       epilog="examples:\n  lidarfx classify info als.skops\n  lidarfx classify info als.skops --json\n",
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    i.add_argument("model", help="model file written by 'lidarfx classify train'")
+    i.add_argument("model", help="model file written by 'lidarfx classify train', or 'default' (the shipped model)")
     i.add_argument("--json", action="store_true", help="print JSON instead of a table")
     i.set_defaults(func=run_info)
 
@@ -229,7 +245,8 @@ def register(sub) -> None:
     e.add_argument("--leave-one-out", action="store_true", help="leave one file out (train on the others)")
     e.add_argument("--test", nargs="+", default=None, metavar="FILE",
                    help="train on FILES, test on these files (per file and pooled)")
-    e.add_argument("-m", "--model", default=None, help="evaluate this trained model on FILES (no training)")
+    e.add_argument("-m", "--model", default=None,
+                   help="evaluate this trained model on FILES (no training); 'default' = the model shipped with lidarfx")
     e.add_argument("--importance", action="store_true", help="impurity and permutation feature importance")
     e.add_argument("--backward-elimination", action="store_true",
                    help="Chehata-style backward feature elimination with a random forest (slow)")
@@ -312,6 +329,10 @@ def run_train(args) -> int:
     from ..classify import train
     from ..errors import LidarfxError
 
+    if args.model is None:  # lidarfx classify train scan.laz model.skops: the model as the last file
+        if len(args.files) < 2 or not str(args.files[-1]).lower().endswith(".skops"):
+            raise LidarfxError("give the output model: --model M.skops, or M.skops as the last file")
+        args.model = args.files.pop()
     if not str(args.model).lower().endswith(".skops"):
         raise LidarfxError(f"model file should end in .skops, got {args.model}")
     check_output_folder(args.model)  # before the training, not after it
@@ -340,6 +361,9 @@ def run_predict(args) -> int:
     from ..classify import load_model
 
     if wants_tiles(args, "classify", by_size=False):  # its defaults (SMRF height, building rule) are not local
+        from ..classify.model import model_path
+
+        args.model = str(model_path(args.model))  # "default": the shipped model's file
         return _predict_tiles(args)
     check_output(args.input, args.output)
     if args.picture:
@@ -458,53 +482,84 @@ def run_info(args) -> int:
         _json.dump(summary, sys.stdout, indent=2)
         print()
         return 0
-    from rich.console import Console
-
-    Console().print(model_table(summary))
+    print(model_text(summary))
     return 0
 
 
-def model_table(m: dict):
-    """A rich table of :meth:`ClassifierModel.summary` (also used by ``lidarfx info``)."""
-    from rich.table import Table
+def model_text(m: dict, width: int | None = None) -> str:
+    """:meth:`ClassifierModel.summary` as a plain two-column table for a terminal of ``width``
+    columns (default: the terminal's).  A path, a class name or a feature name is never cut nor
+    split over lines: the key column is as wide as the longest key, class names are padded to
+    the longest one, lists wrap between their items only, and a line holding a long path is
+    longer than the terminal rather."""
+    import shutil
+    import textwrap
 
-    t = Table(title=f"{m['model']}  —  lidarfx classifier ({m['classifier']})", show_header=False,
-              title_justify="left")
-    t.add_column(style="bold")
-    t.add_column()
+    width = width or shutil.get_terminal_size().columns
+    rows: list[tuple[str, list[str]]] = []
+    key_w = len("training density")  # the longest key
+    avail = max(20, width - key_w - 2)
+
+    def items(parts: list[str], sep: str = ", ") -> list[str]:  # wrapped between the items only
+        lines: list[str] = []
+        for part in parts:
+            if lines and len(lines[-1]) + len(sep) + len(part) + len(sep.rstrip()) <= avail:
+                lines[-1] += sep + part
+            else:
+                if lines:
+                    lines[-1] += sep.rstrip()
+                lines.append(part)
+        return lines
+
+    def prose(text: str) -> list[str]:
+        return textwrap.wrap(text, avail, break_long_words=False, break_on_hyphens=False) or [""]
+
     size = ", ".join(f"{v:,} {k.replace('_', ' ')}" for k, v in m.items() if k in ("boosting_iterations", "trees"))
-    t.add_row("classifier", m["classifier"] + (f" ({size})" if size else ""))
-    t.add_row("classes", "\n".join(f"{c['name']:<14} codes {'+'.join(map(str, c['codes'])):<10} -> {c['output_code']}"
-                                   for c in m["classes"]))
-    t.add_row("features", f"{len(m['features'])} columns; radii {', '.join(f'{r:g}' for r in m['radii'])} m")
+    rows.append(("classifier", [m["classifier"] + (f" ({size})" if size else "")]))
+    name_w = max((len(c["name"]) for c in m["classes"]), default=0)
+    codes = ["+".join(map(str, c["codes"])) for c in m["classes"]]
+    codes_w = max((len(c) for c in codes), default=0)
+    rows.append(("classes", [f"{c['name']:<{name_w}}  codes {k:<{codes_w}}  -> {c['output_code']}"
+                             for c, k in zip(m["classes"], codes)]))
+    rows.append(("features", [f"{len(m['features'])} columns; radii {', '.join(f'{r:g}' for r in m['radii'])} m:"]
+                 + items(list(m["features"]))))
     area = m.get("min_building_area") or 0
     share = m.get("max_multi_return_share") or 1.0
-    t.add_row("small buildings", (f"clusters under {area:g} m² get their next class" + (
+    rows.append(("small buildings", prose(f"clusters under {area:g} m² get their next class" + (
         f"; so do larger ones with more than {share:g} of their points from multi-return pulses" if share < 1 else "")
-        if area else "no object-size rule"))
+        if area else "no object-size rule")))
     cfg = m["config"]
-    t.add_row("settings", f"ground {cfg['ground']}, HAG cap {cfg['hag_cap']}, max disc points "
-                          f"{cfg['max_disc_points']}, terrain augment {cfg['terrain_augment']}, density augment "
-                          f"{cfg.get('density_augment')}, max per class {cfg['max_per_class']}, seed {cfg['seed']}")
-    files = [f"{f['name']}  {f['points']:,} points" + (f", {f['density']:.1f} pts/m²" if f.get("density") else "")
-             for f in m["training_files"]]
-    t.add_row("training files", "\n".join(files) or "n/a")
+    rows.append(("settings", items([f"ground {cfg['ground']}", f"HAG cap {cfg['hag_cap']}",
+                                    f"max disc points {cfg['max_disc_points']}",
+                                    f"terrain augment {cfg['terrain_augment']}",
+                                    f"density augment {cfg.get('density_augment')}",
+                                    f"max per class {cfg['max_per_class']}", f"seed {cfg['seed']}"])))
+    files = m["training_files"]
+    file_w = max((len(str(f["name"])) for f in files), default=0)
+    rows.append(("training files", [f"{f['name']!s:<{file_w}}  {f['points']:,} points"
+                                    + (f", {f['density']:.1f} pts/m²" if f.get("density") else "")
+                                    for f in files] or ["n/a"]))
     if m["training_density"]:
-        t.add_row("training density", f"{m['training_density']:.1f} pts/m² (sparsest file; prediction warns below half)")
-    t.add_row("training sample", ", ".join(f"{k} {v:,}" for k, v in m["training_counts"].items()) or "n/a")
-    t.add_row("versions", f"lidarfx {m['lidarfx_version']}, scikit-learn {m['sklearn_version']}, created {m['created']}")
-    return t
+        rows.append(("training density",
+                     prose(f"{m['training_density']:.1f} pts/m² (sparsest file; prediction warns below half)")))
+    rows.append(("training sample", items([f"{k} {v:,}" for k, v in m["training_counts"].items()]) or ["n/a"]))
+    rows.append(("versions", items([f"lidarfx {m['lidarfx_version']}", f"scikit-learn {m['sklearn_version']}",
+                                    f"created {m['created']}"])))
+    lines = [f"{m['model']}  —  lidarfx classifier ({m['classifier']})"]
+    for key, values in rows:
+        lines += [f"{key if i == 0 else '':<{key_w}}  {v}".rstrip() for i, v in enumerate(values)]
+    return "\n".join(lines)
 
 
 def run_evaluate(args) -> int:
     from ..classify import evaluate, evaluate_model, format_report, load_model, write_report
-    from ..classify.evaluate import _out_dir, report_json
+    from ..classify.report import report_dir, report_json
     from ..errors import LidarfxError
 
     say = _log(args)
     page_job = ReportJob(args)
     if args.out:
-        _out_dir(args.out, create=False)  # a file in the way fails before the work
+        report_dir(args.out, create=False)  # a file in the way fails before the work
     if args.spatial_blocks < 0:
         raise LidarfxError("--spatial-blocks must be >= 0 (0 = no block folds)")
     if args.bootstrap < 0:
@@ -535,12 +590,19 @@ def run_evaluate(args) -> int:
             raise LidarfxError("--by-slope breaks down the results on test files: give --test FILES or --model")
         if cv is not None and cv < 2:
             raise LidarfxError("--cv needs at least 2 folds")
+        from ..classify.evaluate import check_buffer
+        from ..classify.model import read_sources, resolve_defaults
+
+        check_buffer(args.buffer, _config(args))  # before reading: a bad option is refused first
+        # the defaults fitted to the training files as train fits them (return inputs, radii from the spacing)
+        sources = read_sources(read_clouds(args.files, args))
+        config, _ = resolve_defaults(_config(args), sources, say)
         report = evaluate(
-            read_clouds(args.files, args), test=read_clouds(args.test, args), cv=cv,
+            sources, test=read_clouds(args.test, args), cv=cv,
             block_size=args.spatial_blocks or None,
             buffer=args.buffer,
             random_cv=not args.no_random_folds, leave_one_out=args.leave_one_out, classes=args.classes,
-            ignore=_ignore(args), config=_config(args), importance=args.importance,
+            ignore=_ignore(args), config=config, importance=args.importance,
             eliminate=args.backward_elimination, log=say, maps_dir=args.out if args.test else None,
             by_slope=args.by_slope, bootstrap=args.bootstrap,
         )

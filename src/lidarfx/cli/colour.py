@@ -43,7 +43,7 @@ def register(sub) -> None:
         "colour",
         help="RGB colours from morphology (aspect, slope, sun shading), an attribute, joint sets or classes",
         description="Write RGB colours (LAS red/green/blue) from the surface morphology in HSV, a numeric attribute, "
-                    "the joint sets or the classes, and optionally a picture.",
+                    "the joint sets or the classes, and optionally a picture. Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

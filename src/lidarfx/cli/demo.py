@@ -63,15 +63,18 @@ def run(args) -> int:
     if out.exists() and not out.is_dir():
         raise LidarfxError(f"{out} exists and is not a folder")
     created = next((p for p in reversed([out, *out.parents]) if not p.exists()), None)  # topmost new folder
-    say = (lambda m: None) if args.quiet or args.json else (lambda m: console.print(m))
-    say(f"[bold]lidarfx demo[/]: {len(scenes)} scenes -> {out}/")
+    from rich.markup import escape
+
+    # soft_wrap: rich neither wraps nor crops a line (a long path stays whole; the terminal folds it)
+    say = (lambda m: None) if args.quiet or args.json else (lambda m: console.print(m, soft_wrap=True))
+    say(f"[bold]lidarfx demo[/]: {len(scenes)} scenes -> {escape(str(out))}/")
     t0 = time.perf_counter()
     try:
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise LidarfxError(f"cannot create output folder {out}: {exc.strerror}") from None
-        res = run_demo(out, scenes, seed=args.seed, progress=lambda m: say(f"  {m}"))
+        res = run_demo(out, scenes, seed=args.seed, progress=lambda m: say(f"  {escape(m)}"))
         from .. import _json
         from .._atomic import atomic_path
 
@@ -90,16 +93,26 @@ def run(args) -> int:
 
 
 def _print_summary(console, s: dict) -> None:
-    from rich.table import Table
+    """The figures as a plain table on ``console``: every column as wide as its longest value,
+    lines never wrapped nor cropped by rich, so no scene, measure, target or path is cut."""
+    from rich.markup import escape
 
-    t = Table(title="figures against the scenes' truth", title_justify="left")
-    for col in ("scene", "measure", "value", "target", ""):
-        t.add_column(col, justify="right" if col == "value" else "left")
+    rows = []
     for sc in s["scenes"]:
         for f in sc["figures"]:
             v = f["value"]
             mark = "" if f["pass"] is None else ("[green]ok[/]" if f["pass"] else "[red]missed[/]")
-            t.add_row(sc["name"], f["measure"], "" if v is None else f"{v:g}", f["target"], mark)
-    console.print(t)
+            rows.append((str(sc["name"]), str(f["measure"]), "" if v is None else f"{v:g}", str(f["target"]), mark))
+    head = ("scene", "measure", "value", "target")
+    w = [max(len(r[i]) for r in [head, *rows]) for i in range(4)]
+
+    def line(r) -> str:
+        text = f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:>{w[2]}}  {r[3]:<{w[3]}}"
+        return escape(text) + (f"  {r[4]}" if len(r) > 4 and r[4] else "")
+
+    console.print("[bold]figures against the scenes' truth[/]", soft_wrap=True)
+    console.print(f"[bold]{line(head).rstrip()}[/]", soft_wrap=True, highlight=False)
+    for r in rows:
+        console.print(line(r).rstrip(), soft_wrap=True, highlight=False)
     console.print(f"{sum(sc['points'] for sc in s['scenes']):,} points in {len(s['scenes'])} scenes, "
-                  f"{s['seconds']:.1f} s -> open {s['index']}")
+                  f"{s['seconds']:.1f} s -> open {escape(str(s['index']))}", soft_wrap=True)

@@ -49,7 +49,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "discontinuities",
         help="rock faces: discontinuity orientations, joint sets (Fisher), stereonet, spacing, overhangs",
-        description="Find the discontinuities and joint sets of a rock face (SPEC §6, seed 000).",
+        description="Find the discontinuities and joint sets of a rock face. Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -23,8 +23,8 @@ collinear segments merged -> chained into 3-D polylines -> Douglas-Peucker.
 outputs: GeoJSON LineString Z (CRS of the LAS header), optional DXF 3-D
 polylines (layers EDGE, BORDER), CSV table (one row per line: length, support,
 RMS, ends ...) and JSON with the vertices, a plan-view picture.
-Lengths (--threshold, --link, ...) are in coordinate units, default multiples
-of the radius; docs/edges.md.
+Lengths (-r, --threshold, --link, ...) are metres, converted for files in
+feet; their defaults are multiples of the radius; docs/edges.md.
 """
 
 
@@ -32,24 +32,24 @@ def register(sub) -> None:
     p = sub.add_parser(
         "edges",
         help="3-D building edge lines (ridges, eaves, steps) as GeoJSON / DXF / CSV",
-        description="Extract 3-D edge lines from border and edge points (doc 002, SPEC §5).",
+        description="Extract 3-D edge lines from border and edge points (see docs/edges.md). Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.npz)")
     p.add_argument("output", help="lines as GeoJSON (.geojson or .json)")
-    p.add_argument("-r", "--radius", type=float, default=None, help="radius of classification and refinement (default: from the point spacing)")
+    p.add_argument("-r", "--radius", type=float, default=None, help="radius of classification and refinement, m (default: from the point spacing)")
     add_line_outputs(p, "lines", picture="also draw the lines over the points (plan view)",
                      cloud="also write the cloud with structure and edge_candidate")
     p.add_argument("--use-structure", action="store_true", help="use the input's structure attribute (from lidarfx eigenclass)")
     p.add_argument("--references", default="trained", help="references of the classification (see lidarfx eigenclass)")
     p.add_argument("--labels", default="plane_border,edge,corner", help="structure labels of the candidate points, default %(default)s")
-    p.add_argument("--min-length", type=float, default=None, help="shortest line kept (default: the radius)")
+    p.add_argument("--min-length", type=float, default=None, help="shortest line kept, m (default: the radius)")
     p.add_argument("--min-points", type=int, default=8, help="fewest candidate points of a segment, default %(default)s")
-    p.add_argument("--threshold", type=float, default=None, help="RANSAC inlier distance (default: 0.5 × radius)")
-    p.add_argument("--link", type=float, default=None, help="link distance of the components (default: 0.5 × radius)")
-    p.add_argument("--join", type=float, default=None, help="largest gap between segment ends that are chained (default: the radius)")
-    p.add_argument("--simplify", type=float, default=None, help="Douglas-Peucker tolerance (default: 0.1 × radius)")
+    p.add_argument("--threshold", type=float, default=None, help="RANSAC inlier distance, m (default: 0.5 × radius)")
+    p.add_argument("--link", type=float, default=None, help="link distance of the components, m (default: 0.5 × radius)")
+    p.add_argument("--join", type=float, default=None, help="largest gap between segment ends that are chained, m (default: the radius)")
+    p.add_argument("--simplify", type=float, default=None, help="Douglas-Peucker tolerance, m (default: 0.1 × radius)")
     p.add_argument("--no-refine", action="store_true", help="keep the band lines, do not place them with the cloud")
     p.add_argument("--keep-unrefined", action="store_true", help="keep segments whose placement failed")
     p.add_argument("--keep-cloud-border", action="store_true", help="keep lines along the cloud's outer boundary")
@@ -64,7 +64,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from .. import io
     from ..edges import extract_edges
-    from ..ground.dtm import cloud_crs
+    from ..crs import cloud_crs
     from ..vector import export_lines
 
     paths = line_output_paths(args, "lines")
@@ -92,7 +92,7 @@ def run(args) -> int:
         from ..render import lines_view
 
         lines_view(res.cloud, res.lines, picture,
-                   title=f"{Path(args.input).name}: {len(res.lines)} edge lines, r = {res.meta['radius']:g}")
+                   title=f"{Path(args.input).name}: {len(res.lines)} edge lines, r = {res.meta['radius']:g} m")
         if paths["picture"]:
             written["picture"] = paths["picture"]
     t3 = time.perf_counter()
@@ -134,7 +134,7 @@ def _print_summary(s: dict) -> None:
 
     console = Console(stderr=True)
     console.print(f"[bold]{s['lines']:,}[/] lines, {s['total_length']:,.1f} m in total, from {s['candidates']:,} "
-                  f"candidate points of {s['points']:,} (r = {s['radius']:g}) -> {s['outputs']['geojson']}")
+                  f"candidate points of {s['points']:,} (r = {s['radius']:g} m) -> {s['outputs']['geojson']}")
     if s["longest"]:
         t = Table(title=f"longest {len(s['longest'])} lines", title_justify="left")
         for col in ("kind", "length m", "points", "RMS m", "vertices"):

@@ -1,4 +1,4 @@
-"""``lidarfx eigenclass IN OUT``: unsupervised structure classes (doc 002), and
+"""``lidarfx eigenclass IN OUT``: unsupervised structure classes (docs/structures.md), and
 ``lidarfx eigenclass-references OUT.json``: make the reference signatures again."""
 from __future__ import annotations
 
@@ -57,15 +57,16 @@ def register(sub) -> None:
 
     p = sub.add_parser(
         "eigenclass",
-        help="unsupervised structure classes: plane, border, edge, corner, line, volume ... (doc 002)",
-        description="Label every point with the ideal structure whose eigenvalue signature is nearest (SPEC §5).",
+        help="unsupervised structure classes: plane, border, edge, corner, line, volume ...",
+        description="Label every point with the ideal structure whose eigenvalue signature is nearest. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.npz)")
     p.add_argument("output", help="output point cloud (format from the extension)")
     p.add_argument("-r", "--radius", type=float, action="append",
-                   help="sphere radius (coordinate units; repeat for several scales); default: about 40 points on a plane")
+                   help="sphere radius, m (repeat for several scales); default: about 40 points on a plane")
     p.add_argument("--references", default="trained",
                    help="trained (default), analytic (closed forms) or a file from lidarfx eigenclass-references")
     p.add_argument("--weighting", choices=["structure", "uniform"], default="structure",

@@ -22,6 +22,12 @@ distribution, curvature, quadric, eigenvectors, count, echo, ground
 (height above the SMRF ground), all (without ground) — or single names
 (slope, planarity, ...).  Features are written as float32 extra-bytes
 dimensions (LAS/LAZ) or attributes (PLY, text, npz); NaN = not computable.
+When more than half of a feature is NaN, a warning names the likely cause
+(a radius below the point spacing) and a radius that works.
+
+units: lengths are metres; files in feet are converted (-r, --height,
+--d-max, --chunk-size, --buffer; docs/conventions.md).  --scanner is a
+position in the file's coordinates; the features are in the file's unit.
 
   lidarfx features tiles/ out/ -r 0.5 --features eigen,plane,density       # a folder of tiles, in chunks
   lidarfx features big.laz out.laz -r 0.5 --chunk-size 200 --workers 4 --resume
@@ -33,13 +39,14 @@ def register(sub) -> None:
     p = sub.add_parser(
         "features",
         help="compute per-point neighbourhood features",
-        description="Compute per-point neighbourhood features (SPEC §3) and write them as attributes.",
+        description="Compute per-point neighbourhood features (see docs/features.md) and write them as attributes. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", nargs="?", help="input point cloud (.las/.laz/.ply/.xyz/.txt/.csv/.pts/.npy/.npz)")
     p.add_argument("output", nargs="?", help="output point cloud (format from the extension)")
-    p.add_argument("-r", "--radius", type=float, action="append", help="neighbourhood radius in coordinate units, m for metre data (repeat for multi-scale)")
+    p.add_argument("-r", "--radius", type=float, action="append", help="neighbourhood radius, m (repeat for multi-scale)")
     p.add_argument("-f", "--features", default=None,
                    help="comma-separated groups or names; -NAME takes one out of what came before it, "
                    "e.g. all,-quadric (default: eigen,plane,density)")
@@ -47,9 +54,9 @@ def register(sub) -> None:
                    help="sphere of each radius (default), vertical cylinder of each radius, or the k nearest points")
     p.add_argument("-k", type=int, default=None, help="neighbours for --neighbourhood knn (a radius then caps the search)")
     p.add_argument("--scanner", type=xyz, default=None, help="scanner position x,y,z: orient normals towards it (TLS)")
-    p.add_argument("--height", type=float, default=None, help="half-height limit of the vertical cylinder (coordinate units)")
+    p.add_argument("--height", type=float, default=None, help="half-height limit of the vertical cylinder, m")
     p.add_argument("--convention", choices=["default", "cloudcompare", "pdal"], default="default")
-    p.add_argument("--d-max", type=float, default=0.10, help="plane inlier distance (coordinate units), default 0.10")
+    p.add_argument("--d-max", type=float, default=0.10, help="plane inlier distance, m, default 0.10")
     p.add_argument("--bins", type=int, default=10, help="bins of the height-difference histogram")
     p.add_argument("--seed", type=int, default=0, help="seed of the MSAC generator")
     add_columns(p)
@@ -74,6 +81,7 @@ def run(args) -> int:
     import numpy as np
 
     from .. import io
+    from ..crs import units_summary
     from ..features import stream_features
 
     radii = args.radius or []
@@ -133,9 +141,11 @@ def run(args) -> int:
         "output": args.output,
         "points": len(cloud),
         "radii": sorted(radii),
+        "units": units_summary(cloud),
         "neighbourhood": args.neighbourhood,
         "features": names,
         "nan_share": {name: round(c / n, 6) for name, c in nan_count.items()},
+        "warnings": list(getattr(fill, "warnings", [])),
         "seconds": {"read": round(t1 - t0, 3), "index": round(t2 - t1, 3), "features_and_write": round(t3 - t2, 3)},
     }
     if shown is not None:

@@ -23,8 +23,11 @@ tuned on the ISPRS filter-test samples (docs/ground.md).  Only last returns
 are used where return numbers exist; classes 7, 18 and 66 are ignored and keep
 their class.  Every other point is set to 2 (ground) or 1 (unclassified).
 
+Lengths are metres; files in feet are converted (the SMRF lengths, -r,
+--chunk-size, --buffer; docs/conventions.md).
+
 In chunks the filter sees each chunk with a buffer (default: 4 x --window
-rounded up to 50 m, i.e. 100 m; in the input's coordinate units): the filter
+rounded up to 50 m, i.e. 100 m): the filter
 is not local, so a few points near chunk borders may get another class than
 in one in-memory run (docs/scaling.md); --dtm needs --chunk-size 0 (or
 lidarfx dtm on the output).
@@ -47,7 +50,9 @@ DTM_EPILOG = """examples:
   lidarfx dtm in.laz dtm.tif --classify -r 0.5   # run the ground filter first
   lidarfx dtm ground.laz dtm.asc                 # ESRI ASCII grid (+ .prj)
 
-GeoTIFF is written with rasterio when installed, else by the built-in writer
+Lengths are metres; files in feet are converted (-r, the SMRF lengths): a
+file in US feet gets cells of -r metres in feet.  GeoTIFF is written with
+rasterio when installed, else by the built-in writer
 (uncompressed float32 + GeoTIFF keys + .tfw world file).  The DTM is the
 linear TIN of the ground points sampled at the cell centres; cells outside
 their convex hull take the nearest ground height.
@@ -106,7 +111,8 @@ def register(sub) -> None:
     p = sub.add_parser(
         "ground",
         help="classify ground points (SMRF); optional DTM and height above ground",
-        description="Classify ground points (class 2) of ALS data with SMRF and write the cloud.",
+        description="Classify ground points (class 2) of ALS data with SMRF and write the cloud. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=GROUND_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -115,7 +121,7 @@ def register(sub) -> None:
     _add_params(p)
     p.add_argument("--hag", action="store_true", help="add the height_above_ground attribute")
     p.add_argument("--dtm", default=None, metavar="RASTER", help="also write a DTM raster (.tif or .asc)")
-    p.add_argument("-r", "--resolution", type=float, default=1.0, help="DTM cell (map units), default 1.0")
+    p.add_argument("-r", "--resolution", type=float, default=1.0, help="DTM cell, m, default 1.0")
     add_columns(p)
     add_report_option(p)
     add_tile_options(p)
@@ -126,7 +132,8 @@ def register(sub) -> None:
     e = sub.add_parser(
         "ground-eval",
         help="type I / II / total error of the ground filter against a reference class",
-        description="Evaluate the ground filter against the files' own reference classification.",
+        description="Evaluate the ground filter against the files' own reference classification. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EVAL_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -142,13 +149,14 @@ def register(sub) -> None:
     d = sub.add_parser(
         "dtm",
         help="DTM raster (GeoTIFF / ESRI ASCII) from ground points",
-        description="Write a DTM raster interpolated (TIN) from the ground points of a cloud.",
+        description="Write a DTM raster interpolated (TIN) from the ground points of a cloud. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=DTM_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     d.add_argument("input", help="input point cloud")
     d.add_argument("output", help="output raster (.tif, .tiff or .asc)")
-    d.add_argument("-r", "--resolution", type=float, default=1.0, help="cell (map units), default 1.0")
+    d.add_argument("-r", "--resolution", type=float, default=1.0, help="cell, m, default 1.0")
     d.add_argument("--classify", action="store_true", help="run the ground filter first (else class 2 is ground)")
     _add_params(d)
     add_columns(d)
@@ -171,6 +179,7 @@ def _check_raster_path(path: str) -> None:
 
 def run_ground(args) -> int:
     from .. import io
+    from ..crs import units_summary
     from ..ground import (
         apply_ground_classification,
         classify_ground,
@@ -223,7 +232,9 @@ def run_ground(args) -> int:
         "ground_points": int(mask.sum()),
         "ground_share": round(float(mask.mean()), 6) if len(out) else None,
         "parameters": {**params, "ignore_classes": args.ignore_classes},
-        "dtm": None if raster is None else {"path": args.dtm, "shape": list(raster.shape), "resolution": raster.resolution},
+        "dtm": None if raster is None else {"path": args.dtm, "shape": list(raster.shape), "resolution": args.resolution,
+                                            "cell_map_units": raster.resolution},
+        "units": units_summary(cloud),
         "seconds": {
             "read": round(t1 - t0, 3),
             "classify": round(t2 - t1, 3),
@@ -312,6 +323,7 @@ def run_eval(args) -> int:
 
 def run_dtm(args) -> int:
     from .. import io
+    from ..crs import units_summary
     from ..errors import LidarfxError
     from ..ground import classify_ground, dtm
     from ..ground.dtm import check_resolution
@@ -338,7 +350,9 @@ def run_dtm(args) -> int:
         "output": args.output,
         "ground_points": int(mask.sum()),
         "shape": list(raster.shape),
-        "resolution": raster.resolution,
+        "resolution": args.resolution,
+        "cell_map_units": raster.resolution,
+        "units": units_summary(cloud),
         "origin": list(raster.origin),
         "epsg": (raster.crs or {}).get("epsg"),
         "seconds": round(sec, 3),
@@ -347,5 +361,5 @@ def run_dtm(args) -> int:
         _json.dump(summary, sys.stdout, indent=2)
         print()
     elif not args.quiet:
-        print(f"DTM {raster.shape[1]}x{raster.shape[0]} cells of {raster.resolution} -> {args.output}", file=sys.stderr)
+        print(f"DTM {raster.shape[1]}x{raster.shape[0]} cells of {args.resolution:g} m -> {args.output}", file=sys.stderr)
     return 0

@@ -31,7 +31,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "members",
         help="lattice tower members (legs, braces, arms) as 3-D lines: GeoJSON / DXF / CSV",
-        description="Vectorise the straight members of a lattice tower scanned by TLS.",
+        description="Vectorise the straight members of a lattice tower scanned by TLS. Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -51,9 +51,9 @@ def register(sub) -> None:
     p.add_argument("--link", type=float, default=None,
                    help="link distance of the clusters of line points (m; default: radius / 2, or the threshold)")
     p.add_argument("--max-gap", type=float, default=None,
-                   help="largest gap between collinear pieces merged into one member (default: 6 x radius)")
+                   help="largest gap between collinear pieces merged into one member, m (default: 6 x radius)")
     p.add_argument("--join", type=float, default=None,
-                   help="how far a member reaches beyond its line points to grow and meet others (default: 4 x radius)")
+                   help="how far a member reaches beyond its line points to grow and meet others, m (default: 4 x radius)")
     p.add_argument("--seed", type=int, default=0, help="seed of the RANSAC draws, default %(default)s")
     add_line_outputs(p, "members", picture="also draw the members over the points",
                      cloud="also write the cloud with member_id and member_label")
@@ -66,7 +66,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from .. import io
-    from ..ground.dtm import cloud_crs
+    from ..crs import cloud_crs
     from ..tower.members import check_parameters, vectorise_members
     from ..vector import export_lines
 

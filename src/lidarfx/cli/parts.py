@@ -36,7 +36,8 @@ def register(sub) -> None:
         "parts",
         help="small parts of a lattice tower: bolts and rivets, insulators, corona rings",
         description="Find the bolts and rivets (points standing off their local plane) and the compact parts "
-                    "(insulators, corona rings) of a steel lattice tower scanned by TLS (seed 000).",
+                    "(insulators, corona rings) of a steel lattice tower scanned by TLS. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -32,7 +32,8 @@ def register(sub) -> None:
     p = sub.add_parser(
         "powerlines",
         help="power-line wires: catenaries per conductor and span, sag, clearances, load cases",
-        description="Extract the wires of an ALS power-line corridor and fit one catenary per conductor and span (SPEC §6).",
+        description="Extract the wires of an ALS power-line corridor and fit one catenary per conductor and span "
+                    "(see docs/powerlines.md). Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -88,7 +89,7 @@ def run(args) -> int:
     from .. import io
     from .._atomic import check_not_same_file
     from ..errors import LidarfxError
-    from ..ground.dtm import cloud_crs
+    from ..crs import cloud_crs
     from ..powerlines import extract_powerlines
     from ..powerlines.loads import conductor, parse_load_case
     from ..powerlines.output import load_case_records, write_tables

@@ -28,7 +28,7 @@ def register(sub) -> None:
         "report",
         help="an HTML report with a 3-D viewer of the cloud (one file, opens offline)",
         description="Write OUTDIR/index.html: the cloud's summary, an interactive 3-D viewer (colour by any "
-                    "attribute, pick points) and a picture, optionally with features computed first.",
+                    "attribute, pick points) and a picture, optionally with features computed first. Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -38,7 +38,7 @@ def register(sub) -> None:
                    help="compute these features first (groups or names as in lidarfx features, e.g. eigen,plane); "
                         "needs -r")
     p.add_argument("-r", "--radius", type=float, action="append",
-                   help="neighbourhood radius of the features in coordinate units (repeat for multi-scale); "
+                   help="neighbourhood radius of the features, m (repeat for multi-scale); "
                         "alone it computes the default features (eigen,plane,density)")
     p.add_argument("--attributes", default=None, metavar="A,B,C",
                    help="attributes carried by the viewer, in this order (default: classification, the computed "

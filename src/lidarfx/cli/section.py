@@ -30,6 +30,8 @@ A --by that the file lacks but that is a feature (lidarfx features --list) is
 computed for the slab points with neighbours from the whole cloud around them
 (sphere of -r); --features adds more to OUT.  LAS/LAZ input is read in chunks
 and only the points near the slab are kept.  docs/tower.md#section-projection.
+Lengths are metres; files in feet are converted (--width, -r); --from, --to
+are positions in the file's coordinates, and section_s/h/d are in its unit.
 """
 
 
@@ -42,7 +44,8 @@ def register(sub) -> None:
         "section",
         help="section projection: the points of a slab around a cut plane with along / height / offset, and a picture",
         description="Cut a slab out of a point cloud along a line (vertical or inclined cut plane) and project it: "
-                    "section_s, section_h, section_d per point, and a profile picture coloured by an attribute.",
+                    "section_s, section_h, section_d per point, and a profile picture coloured by an attribute. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -78,7 +81,10 @@ def run(args) -> int:
     from ..section import ATTRIBUTES, cut_section, read_near_section, section_frame, slab_indices
     from .colour import _parse_range
 
-    frame = section_frame(args.start, args.end, args.width, args.normal)
+    from ..crs import file_unit_to_metre
+
+    unit = file_unit_to_metre(args.input)  # --width and -r are metres, --from / --to coordinates
+    frame = section_frame(args.start, args.end, args.width, args.normal, unit=unit)
     check_output(args.input, args.output)
     report = ReportJob(args)
     by = args.by.strip() if args.by else ""
@@ -104,7 +110,7 @@ def run(args) -> int:
     progress = False if args.quiet else None
 
     t0 = time.perf_counter()
-    margin = radius if radius is not None else 0.0
+    margin = radius if radius is not None else 0.0  # m, as the width
     near = read_near_section(args.input, frame, margin, columns=columns_of(args), progress=progress)
     t1 = time.perf_counter()
     compute = list(features)
@@ -114,7 +120,7 @@ def run(args) -> int:
         compute += [n for n in by_feature if n not in compute]
     cut = cut_section(near, frame)
     if not len(cut):
-        raise LidarfxError(f"no point lies in the section (length {frame.length:.3f} m, width {frame.width:g} m); "
+        raise LidarfxError(f"no point lies in the section (length {frame.length * unit:.3f} m, width {args.width:g} m); "
                            f"check --from / --to against `lidarfx info {args.input}`")
     if compute:
         import numpy as np

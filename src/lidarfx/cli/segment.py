@@ -46,7 +46,8 @@ def register(sub) -> None:
     p = sub.add_parser(
         "segment",
         help="plane segmentation by surface growing (segment_id, per-segment table)",
-        description="Segment a point cloud into planes by surface growing against the segment plane (SPEC §4).",
+        description="Segment a point cloud into planes by surface growing against the segment plane. "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -121,6 +122,11 @@ def run(args) -> int:
         inplace=True,
         progress=progress,
     )
+    if out.meta["segmentation"]["segments"] == 0:  # stop: an empty segmentation is a wrong setting
+        from ..errors import LidarfxError
+        from ..segment.planes import no_segments_hint
+
+        raise LidarfxError(no_segments_hint(out))
     t2 = time.perf_counter()
     rows = segments_table(out)
     t3 = time.perf_counter()

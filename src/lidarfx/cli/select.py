@@ -27,7 +27,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "select",
         help="keep the points where an attribute expression holds",
-        description="Select points by criteria: a safe expression over attributes (SPEC §4).",
+        description="Select points by criteria: a safe expression over attributes.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -14,7 +14,8 @@ EPILOG = """examples:
 
 cells: the cubes [i c, (i+1) c) x [j c, (j+1) c) x [k c, (k+1) c) of edge c
 anchored at (0, 0, 0): the same grid for every file, so tiles thinned one by one
-fit together.  Exactly one point is kept per occupied cell:
+fit together (in a file in feet: a cell of --cell metres in feet, from 0 ft).
+Exactly one point is kept per occupied cell:
   centre   nearest the cell centre (default)
   first    first in file order
   lowest   smallest z;  highest: largest z
@@ -35,13 +36,14 @@ def register(sub) -> None:
     p = sub.add_parser(
         "thin",
         help="block (voxel) thinning: one point per occupied cubic cell, streamed for LAS/LAZ",
-        description="Keep exactly one point per occupied cubic cell of edge --cell (block / voxel thinning).",
+        description="Keep exactly one point per occupied cubic cell of edge --cell (block / voxel thinning). "
+                    "Lengths are metres; files in feet are converted.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="input point cloud (.las/.laz streamed; .ply/.xyz/.txt/.csv/.npz in memory)")
     p.add_argument("output", help="output point cloud (format from the extension)")
-    p.add_argument("--cell", type=float, required=True, help="cell edge, in coordinate units (m)")
+    p.add_argument("--cell", type=float, required=True, help="cell edge, m")
     p.add_argument("--keep", default="centre", choices=KEEP, help="which point of a cell is kept (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="--keep random: the seed (default %(default)s)")
     add_columns(p)
@@ -65,6 +67,6 @@ def _print_summary(s: dict) -> None:
     console = Console(stderr=True)
     share = f" ({100 * s['share_kept']:.2f} %)" if s["share_kept"] is not None else ""
     console.print(f"[bold]{s['kept']:,}[/] of {s['points']:,} points kept{share}, one per occupied "
-                  f"{s['cell']:g} cell ({s['keep']}) -> {s['output']}")
+                  f"{s['cell']:g} m cell ({s['keep']}) -> {s['output']}")
     sec = s["seconds"]
     console.print(f"{s['mode']}: cells {sec['cells']:.2f} s, write {sec['write']:.2f} s")

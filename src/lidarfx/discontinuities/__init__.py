@@ -1,4 +1,4 @@
-"""Rock-face discontinuities (seed 000, SPEC §6): orientations, joint sets, spacing, overhangs.
+"""Rock-face discontinuities (LIS slides; docs/discontinuities.md): orientations, joint sets, spacing, overhangs.
 
 >>> import lidarfx
 >>> cloud = lidarfx.read("face.laz")                                   # doctest: +SKIP

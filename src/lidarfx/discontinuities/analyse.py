@@ -1,6 +1,6 @@
 """Rock-face discontinuities: orientations, joint sets, spacing, traces, reference horizon, overhangs.
 
-Steps of :func:`analyse_discontinuities` (seed 000, LIS; SPEC §6):
+Steps of :func:`analyse_discontinuities` (after the LIS slides; docs/discontinuities.md):
 
 1. **Local planes.**  Normal, ``plane_std`` and planarity of every point at the
    normal radius (feature engine); per-point ``dip`` and ``dip_direction``.
@@ -224,6 +224,7 @@ def analyse_discontinuities(
     reference_plane: Any = None,
     overhang_angle: float = DEFAULTS["overhang_angle"],
     progress: bool | None = None,
+    units: str = "auto",
 ) -> Discontinuities:
     """Discontinuity orientations, joint sets, spacing, traces, reference horizon and overhangs.
 
@@ -237,7 +238,7 @@ def analyse_discontinuities(
     scanner:
         One scanner position ``(x, y, z)`` or several ``[(x, y, z), …]``.  Normals
         are oriented towards them (outwards), and the reference horizon defaults
-        to a horizontal plane at their mean height (seed 000).
+        to a horizontal plane at their mean height (as in the LIS slides).
     max_distance, growing_radius, max_angle:
         Segmentation (LIS): largest distance to the segment plane (default 3 ×
         the median ``plane_std`` at the radius, i.e. the surface roughness, at
@@ -263,7 +264,14 @@ def analyse_discontinuities(
         degrees below the horizontal (default 0).
     progress:
         Progress bars of the feature computation (default: on a terminal for large clouds).
+    units:
+        ``"auto"`` (default): ``radius``, ``max_distance``, ``growing_radius`` and ``min_width``
+        are metres, converted when the LAS header's CRS names another linear unit (US survey
+        feet, feet); ``"native"``: coordinate units as given.  The lengths of the tables
+        (segments, sets) and of ``meta["parameters"]`` are metres; scanner positions, the
+        reference plane and the per-point attributes are in the cloud's coordinates.
     """
+    from ..crs import metres_per_unit
     from ..features import feature_arrays
     from ..neighbors import default_radius
     from ..segment import segment_planes
@@ -277,15 +285,17 @@ def analyse_discontinuities(
     ref = parse_reference_plane(reference_plane, scanners)
     if ref is None:
         ref = parse_reference_plane("horizontal" if scanners is not None else "fit", scanners)
-    r = default_radius(cloud) if radius is None else check_number("radius", radius, 0.0, 1e6, open_lo=True)
-    dmax = None if max_distance is None else check_number("max_distance", max_distance, 0.0, 1e6, open_lo=True)
-    rgrow = 1.5 * r if growing_radius is None else check_number("growing_radius", growing_radius, 0.0, 1e6, open_lo=True)
+    u = metres_per_unit(cloud, units)  # lengths in metres -> coordinate units
+    r = default_radius(cloud) if radius is None else check_number("radius", radius, 0.0, 1e6, open_lo=True) / u
+    dmax = None if max_distance is None else check_number("max_distance", max_distance, 0.0, 1e6, open_lo=True) / u
+    rgrow = 1.5 * r if growing_radius is None else check_number("growing_radius", growing_radius, 0.0, 1e6,
+                                                                open_lo=True) / u
     max_angle = check_number("max_angle", max_angle, 0.0, 90.0, open_lo=True)
     min_segment_size = check_int("min_segment_size", min_segment_size, 2, 10**9)
     min_planarity = check_number("min_planarity", min_planarity, 0.0, 1.0)
     overhang_angle = check_number("overhang_angle", overhang_angle, -90.0, 90.0)
     if min_width is not None:
-        min_width = check_number("min_width", min_width, 0.0, 1e6)
+        min_width = check_number("min_width", min_width, 0.0, 1e6) / u
     if n_sets is not None:
         n_sets = check_int("n_sets", n_sets, 1, 50)
     check_search_options(n_sets=n_sets, bandwidth=bandwidth, separation=separation, cone=cone, min_share=min_share)
@@ -304,7 +314,7 @@ def analyse_discontinuities(
     # 2. segments + LIS selection
     seg = segment_planes(cloud, normal_radius=r, max_distance=dmax, growing_radius=rgrow, max_angle=max_angle,
                          min_size=min_segment_size + 1, min_width=rgrow if min_width is None else min_width,
-                         features=feats, progress=progress)
+                         features=feats, progress=progress, units="native")
     sid = np.asarray(seg["segment_id"]).astype(np.int64)
     ssize = np.asarray(seg["segment_size"])
     with np.errstate(invalid="ignore"):
@@ -412,10 +422,10 @@ def analyse_discontinuities(
             "centroid_z": float(c_seg[k, 2] + origin[2]),
             "normal_x": float(n_seg[k, 0]), "normal_y": float(n_seg[k, 1]), "normal_z": float(n_seg[k, 2]),
             "dip": float(seg_dip[k]), "dip_direction": float(seg_ddir[k]), "strike": float((seg_ddir[k] - 90.0) % 360.0),
-            "angle_to_set": float(angle_to_set[k]), "rms": float(math.sqrt(lam_seg[k, 2])),
-            "planarity": float(med_plan[k]), "area": float(area[k]), "trace_length": float(trace[k]),
-            "strike_length": float(strike_len[k]), "dip_length": float(dip_len[k]),
-            "reference_distance": float(seg_ref[k]), "overhang": int(seg_over[k]),
+            "angle_to_set": float(angle_to_set[k]), "rms": float(math.sqrt(lam_seg[k, 2])) * u,
+            "planarity": float(med_plan[k]), "area": float(area[k]) * u * u, "trace_length": float(trace[k]) * u,
+            "strike_length": float(strike_len[k]) * u, "dip_length": float(dip_len[k]) * u,
+            "reference_distance": float(seg_ref[k]) * u, "overhang": int(seg_over[k]),
         })
     n_assigned = int((set_id >= 0).sum())
     sets = []
@@ -432,9 +442,10 @@ def analyse_discontinuities(
             "kappa": st["kappa"], "alpha95": st["alpha95"], "spread": st["spread"],
             "segments": int(len(members)), "points": npts, "share": npts / n_assigned if n_assigned else 0.0,
             "selected_share": float(search.shares[k]),
-            "area": float(area[members].sum()), "mean_trace_length": float(trace[members].mean()) if len(members) else math.nan,
-            "spacing_mean": float(gaps.mean()) if len(gaps) else math.nan,
-            "spacing_median": float(np.median(gaps)) if len(gaps) else math.nan,
+            "area": float(area[members].sum()) * u * u,
+            "mean_trace_length": float(trace[members].mean()) * u if len(members) else math.nan,
+            "spacing_mean": float(gaps.mean()) * u if len(gaps) else math.nan,
+            "spacing_median": float(np.median(gaps)) * u if len(gaps) else math.nan,
             "spacing_count": int(len(gaps)),
             "overhang_segments": int(seg_over[members].sum()),
         })
@@ -462,13 +473,16 @@ def analyse_discontinuities(
                                  "plane": "plane given by a point and a normal"}[ref["kind"]]}
     meta = {
         "points": n,
-        "parameters": {"radius": r, "max_distance": dmax, "growing_radius": rgrow, "max_angle": max_angle,
+        "parameters": {"radius": r * u, "max_distance": dmax * u, "growing_radius": rgrow * u, "max_angle": max_angle,
                        "min_segment_size": min_segment_size,
-                       "min_width": rgrow if min_width is None else min_width, "min_planarity": min_planarity, "n_sets": n_sets,
+                       "min_width": (rgrow if min_width is None else min_width) * u, "min_planarity": min_planarity,
+                       "n_sets": n_sets,
                        "bandwidth": float(bandwidth), "separation": float(separation), "cone": float(cone),
                        "min_share": float(min_share), "overhang_angle": overhang_angle,
                        "scanners": None if scanners is None else scanners.tolist(),
                        "radius_source": "given" if radius is not None else "about 40 points on a plane"},
+        "lengths": "m" if units == "auto" else "coordinate units",
+        "unit_to_metre": u if units == "auto" else None,
         "segments": nseg,
         "segmented_points": int(member.sum()),
         "selected_points": int(selected.sum()),

@@ -1,4 +1,4 @@
-"""Per-point neighbourhood features (SPEC §2–3).
+"""Per-point neighbourhood features (docs/features.md).
 
 >>> import lidarfx
 >>> cloud = lidarfx.read("scan.laz")                                  # doctest: +SKIP

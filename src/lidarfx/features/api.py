@@ -7,6 +7,7 @@ from typing import Callable, Iterable, Sequence
 import numba as nb
 import numpy as np
 
+from .. import _parallel as parallel
 from ..cloud import PointCloud
 from ..errors import LidarfxError, check_int, check_seed
 from ..neighbors import NeighborIndex, default_cell_for_knn, ring_buffer_size
@@ -59,24 +60,22 @@ def _query_index(query, n: int) -> np.ndarray | None:
     return q
 
 
-@nb.njit(cache=True, parallel=True)
-def _fill_nan(a):
-    for r in nb.prange(a.shape[0]):
-        a[r, :] = np.nan
-
-
-@nb.njit(cache=True, parallel=True)
-def _unpermute_rows(a, perm):
-    """In place, for every row: a[r, perm[i]] = old a[r, i] — as a gather through the
-    inverse permutation (sequential writes), one row at a time (it stays in cache)."""
-    inv = np.empty_like(perm)
-    for i in range(perm.shape[0]):
-        inv[perm[i]] = i
-    for r in nb.prange(a.shape[0]):
+@nb.njit(cache=True, nogil=True)
+def _unpermute_rows(lo, hi, a, inv):
+    """In place, for rows ``lo:hi``: a[r, perm[i]] = old a[r, i] — as a gather through the
+    inverse permutation ``inv`` (sequential writes), one row at a time (it stays in cache)."""
+    for r in range(lo, hi):
         tmp = a[r].copy()
         row = a[r]
         for j in range(tmp.shape[0]):
             row[j] = tmp[inv[j]]
+
+
+def unpermute_rows(a: np.ndarray, perm: np.ndarray) -> None:
+    """In place, for every row of the 2-D ``a``: a[r, perm[i]] = old a[r, i]."""
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.shape[0], dtype=perm.dtype)
+    parallel.run(_unpermute_rows, a.shape[0], a, inv, grain=1)
 
 
 def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:
@@ -90,6 +89,47 @@ def _grid_order(q: np.ndarray, cell: float) -> np.ndarray:
 def _suffixes(rs: list[float]) -> list[str]:
     """Attribute-name suffix of every scale ("" for a single one)."""
     return [scale_suffix(r) for r in rs] if len(rs) > 1 else [""]
+
+
+def _lengths(cloud: PointCloud, units: str, rs: list[float], height, d_max, msac_threshold):
+    """The run's lengths in the cloud's coordinate unit (docs/conventions.md: given in metres and
+    converted when the LAS CRS is in feet; ``units="native"``: as given): ``(metres per unit,
+    radii, height, d_max, msac_threshold)``."""
+    from ..crs import length_to_units, metres_per_unit
+
+    u = metres_per_unit(cloud, units)
+    if u == 1.0:
+        return u, list(rs), height, d_max, msac_threshold
+    return (u, [r / u for r in rs], length_to_units(u, height), length_to_units(u, d_max),
+            length_to_units(u, msac_threshold))
+
+
+def _scale_names(names: list[str], rs_units: list[float], rs: list[float], neighbourhood: str) -> dict[str, str]:
+    """Attribute names of the radii in coordinate units -> names of the same radii in metres
+    (the multi-scale suffix names the radius as the user gave it)."""
+    if neighbourhood == "knn" or len(rs) < 2 or rs_units == rs:
+        return {}
+    out = {}
+    for su, sm in zip(_suffixes(rs_units), _suffixes(rs)):
+        out.update({n: n[: -len(su)] + sm for n in names if n.endswith(su)})
+    return out
+
+
+def _nan_check(arrays: dict, xyz: np.ndarray, rs: list[float], neighbourhood: str, unit: float,
+               query_xyz=None, counts: dict | None = None, points: int | None = None) -> list[str]:
+    """The warning when most of a computed feature is NaN (:mod:`lidarfx.features.nan`), issued
+    and returned.  ``counts`` / ``points``: NaN counts gathered over the pieces of a stream."""
+    from .nan import nan_warnings, warn
+
+    if counts is None:
+        m = max(len(next(iter(arrays.values()))), 1) if arrays else 1
+        shares = {n: np.count_nonzero(np.isnan(v)) / m for n, v in arrays.items()}
+    else:
+        shares = {n: c / max(points or 1, 1) for n, c in counts.items()}
+    msgs = nan_warnings(shares, xyz, radii=rs, suffixes=[""] if neighbourhood == "knn" else _suffixes(rs),
+                        neighbourhood=neighbourhood, unit=unit, query_xyz=query_xyz)
+    warn(msgs, stacklevel=4)
+    return msgs
 
 
 MAX_HIST_BINS = 1000
@@ -246,29 +286,29 @@ def feature_arrays(
         col[s] = c
     out = np.empty((nscale, len(req.slots), m), dtype=np.float32)
     if not req.need_engine:
-        _fill_nan(out.reshape(-1, m))  # otherwise the engine initialises every row it writes
+        out.fill(np.nan)  # otherwise the engine initialises every row it writes
     sc = np.zeros(3) if scanner is None else np.asarray(scanner, dtype=np.float64) - index.origin
     hz = np.inf if height is None else float(height)
     nbuf = ring_buffer_size(float(rad.max()), g.cell)
     conv = CONVENTIONS[convention]
-    show = wanted(progress, m * nscale, threshold=2_000_000)
+    show = wanted(progress)
     with bar("features", m, show) as advance:
         for a in range(0, m, _BLOCK):
             b = min(m, a + _BLOCK)
             if req.need_engine:
-                point_features(
-                    *g, q, a, b, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
-                    int(hist_bins), req.need_cylinder, req.need_pass2, nbuf, out,
+                parallel.run(
+                    point_features, b - a, *g, q, rad, kind, hz, sc, scanner is not None, col, conv, float(d_max),
+                    int(hist_bins), req.need_cylinder, req.need_pass2, nbuf, out, start=a,
                 )
             if req.need_msac:
                 thr = float(d_max if msac_threshold is None else msac_threshold)
                 for s in range(nscale):
-                    msac_features(
-                        *g, q, a, b, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
-                        10, int(msac_iterations), int(seed), nbuf, out,
+                    parallel.run(
+                        msac_features, b - a, *g, q, qid, rad, s, kind, hz, sc, scanner is not None, col, thr,
+                        10, int(msac_iterations), int(seed), nbuf, out, start=a,
                     )
             advance(b - a)
-    _unpermute_rows(out.reshape(-1, m), perm)
+    unpermute_rows(out.reshape(-1, m), perm)
     result: dict[str, np.ndarray] = {}
     for s, suffix in enumerate(names_for_scale):
         for c, slot in enumerate(req.slots):
@@ -295,6 +335,7 @@ def compute_features(
     seed: int = 0,
     progress: bool | None = None,
     inplace: bool = False,
+    units: str = "auto",
 ) -> PointCloud:
     """Compute per-point features and return a cloud carrying them as attributes.
 
@@ -310,7 +351,8 @@ def compute_features(
         ``height_above_ground`` (group ``ground``) uses the cloud's class 2
         points, or runs :func:`lidarfx.ground.classify_ground` when there are none.
     radius, radii:
-        One radius, or several (multi-scale: names get the suffix ``_r0.50``).
+        One radius, or several (multi-scale: names get the suffix ``_r0.50``), in metres
+        (converted when the LAS CRS is in feet; see ``units``).
         With ``neighbourhood="knn"`` an optional radius caps the kNN search.
     neighbourhood:
         ``sphere`` (3-D), ``cylinder`` (vertical, 2-D distance) or ``knn``.
@@ -328,9 +370,9 @@ def compute_features(
         Scanner position (x, y, z) for TLS: normals are oriented towards it
         instead of up.
     height:
-        Half-height limit of the vertical cylinder (default: unbounded).
+        Half-height limit of the vertical cylinder (m; default: unbounded).
     convention:
-        ``default`` (SPEC table), ``cloudcompare`` (raw eigenvalues in
+        ``default`` (docs/features.md §3), ``cloudcompare`` (raw eigenvalues in
         omnivariance / eigenentropy, as CloudCompare and jakteristics) or
         ``pdal`` (square roots of the eigenvalues in the ratio features, as
         PDAL's SQRT mode and pgeof; pgeof also adds 1e-3 to its denominators).
@@ -347,6 +389,13 @@ def compute_features(
     inplace:
         Add the features to ``cloud`` itself instead of a new cloud (ignored
         with ``query``).
+    units:
+        ``"auto"`` (default): the lengths ``radius``, ``radii``, ``height``, ``d_max`` and
+        ``msac_threshold`` are metres, converted to the coordinate unit when the LAS header's
+        CRS names another linear unit (US survey feet, feet); ``"native"``: they are in
+        coordinate units as given.  Positions (``scanner``) are coordinates, and the features
+        themselves are in the coordinate unit (plane_std, z_range, densities ...), like the
+        coordinates (docs/conventions.md).
 
     Returns
     -------
@@ -354,16 +403,23 @@ def compute_features(
         Features as float32 attributes; NaN where not computable (fewer than 3
         neighbours for covariance features, 6 for curvature, flat ground for
         aspect, ...).  ``result.meta["features"]`` lists the names written.
+        When more than half of the points are NaN for a feature, a
+        :class:`~lidarfx.errors.LidarfxWarning` names it with the likely cause (a radius
+        below the point spacing) and a radius that works (:mod:`lidarfx.features.nan`);
+        ``result.meta["feature_warnings"]`` holds it too.
     """
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("compute_features expects a PointCloud (see lidarfx.read)")
     req = resolve(features)
     qi = _query_index(query, len(cloud))
+    rs = radii_list(radius, radii) if req.slots else []
+    check_options(req, rs, neighbourhood, k, convention, hist_bins, height, d_max=d_max,  # metres, as given
+                  msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
+    unit, rs_units, height, d_max, msac_threshold = _lengths(cloud, units, rs, height, d_max, msac_threshold)
     arrays = feature_arrays(
         cloud.xyz,
         req,
-        radius=radius,
-        radii=radii,
+        radii=rs_units,
         neighbourhood=neighbourhood,
         k=k,
         query_xyz=None if qi is None else cloud.xyz[qi],
@@ -378,6 +434,10 @@ def compute_features(
         seed=seed,
         progress=progress,
     )
+    rename = _scale_names(list(arrays), rs_units, rs, neighbourhood)
+    if rename:
+        arrays = {rename.get(n, n): v for n, v in arrays.items()}
+    msgs = _nan_check(arrays, cloud.xyz, rs, neighbourhood, unit, None if qi is None else cloud.xyz[qi])
     point = {name: _point_feature(name, cloud) for name in req.point}
     if qi is not None:
         result = cloud.subset(qi)
@@ -389,6 +449,8 @@ def compute_features(
     result.update(point)
     result.update(arrays)
     result.meta["features"] = list(req.point) + list(arrays)
+    if msgs:
+        result.meta["feature_warnings"] = msgs
     return result
 
 
@@ -408,6 +470,7 @@ def stream_features(
     msac_threshold: float | None = None,
     msac_iterations: int = 100,
     seed: int = 0,
+    units: str = "auto",
 ) -> tuple[list[str], Callable[[int, int], dict[str, np.ndarray]]]:
     """The features of :func:`compute_features`, computed piece by piece.
 
@@ -418,7 +481,9 @@ def stream_features(
     float32 arrays.  Values equal :func:`compute_features`' exactly.  Meant for
     writers that stream (``lidarfx.write(cloud, path, fill=fill)``): a file's
     features then never exist in memory all at once.  Parameters as in
-    :func:`compute_features`; every check runs here, before any work.
+    :func:`compute_features` (lengths in metres, ``units``); every check runs here, before
+    any work.  Once every point has been filled, the NaN warning of
+    :func:`compute_features` is issued; ``fill.warnings`` holds it.
     """
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("stream_features expects a PointCloud (see lidarfx.read)")
@@ -426,28 +491,46 @@ def stream_features(
     rs = radii_list(radius, radii) if req.slots else []
     check_options(req, rs, neighbourhood, k, convention, hist_bins, height, d_max=d_max,
                   msac_threshold=msac_threshold, msac_iterations=msac_iterations, seed=seed, scanner=scanner)
+    unit, rs_units, height, d_max, msac_threshold = _lengths(cloud, units, rs, height, d_max, msac_threshold)
     if req.slots:
         _check_not_empty(cloud.xyz)
-    index = feature_index(cloud.xyz, neighbourhood, k, rs, req) if req.slots else None
+    index = feature_index(cloud.xyz, neighbourhood, k, rs_units, req) if req.slots else None
     point = {name: _point_feature(name, cloud) for name in req.point}
     names = list(req.point)
     if req.slots:
         suffixes = [""] if neighbourhood == "knn" else _suffixes(rs)
         names += [S.NAMES[slot] + sfx for sfx in suffixes for slot in req.slots]
     opts = dict(
-        radii=rs, neighbourhood=neighbourhood, k=k, scanner=scanner, height=height,
+        radii=rs_units, neighbourhood=neighbourhood, k=k, scanner=scanner, height=height,
         convention=convention, d_max=d_max, hist_bins=hist_bins, msac_threshold=msac_threshold,
         msac_iterations=msac_iterations, seed=seed, progress=False,
     )
+    rename: dict[str, str] | None = None
+    n = len(cloud)
+    seen = {"points": 0, "nan": {}}
 
     def fill(start: int, stop: int) -> dict[str, np.ndarray]:
+        nonlocal rename
         out = {name: values[start:stop] for name, values in point.items()}
         if req.slots:
             ids = np.arange(start, stop, dtype=np.int64)
-            out.update(feature_arrays(cloud.xyz, req, query_xyz=cloud.xyz[start:stop], query_ids=ids,
-                                      index=index, **opts))
+            arrays = feature_arrays(cloud.xyz, req, query_xyz=cloud.xyz[start:stop], query_ids=ids,
+                                    index=index, **opts)
+            if rename is None:
+                rename = _scale_names(list(arrays), rs_units, rs, neighbourhood)
+            if rename:
+                arrays = {rename.get(k_, k_): v for k_, v in arrays.items()}
+            out.update(arrays)
+            if seen["points"] < n:  # the NaN warning once every point is done
+                seen["points"] += stop - start
+                for name, v in arrays.items():
+                    seen["nan"][name] = seen["nan"].get(name, 0) + int(np.count_nonzero(np.isnan(v)))
+                if seen["points"] >= n:
+                    fill.warnings[:] = _nan_check({}, cloud.xyz, rs, neighbourhood, unit, counts=seen["nan"],
+                                                  points=seen["points"])
         return out
 
+    fill.warnings = []  # type: ignore[attr-defined]
     return names, fill
 
 

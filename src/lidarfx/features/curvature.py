@@ -1,4 +1,4 @@
-"""Quadric curvature (doc 004, Mandlburger & Briese 2009).
+"""Quadric curvature (Mandlburger & Briese 2009; docs/features.md §3.9).
 
 In the frame of the local PCA plane (axes v1, v2, normal n; origin at the
 query point; coordinates divided by the radius for conditioning) the

@@ -3,7 +3,7 @@
 Closed-form symmetric 3×3 eigen solve (trigonometric eigenvalues; robust
 eigenvectors after D. Eberly, "A Robust Eigensolver for 3×3 Symmetric
 Matrices", 2014) and the per-point eigen / Westin feature formulas of
-SPEC §3.  Everything here is a numba function on scalars: the fused scan
+docs/features.md §3.  Everything here is a numba function on scalars: the fused scan
 kernel in :mod:`lidarfx.features.engine` calls it once per point and scale.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 from . import slots as S
 
 # conventions (see docs/features.md)
-CONV_DEFAULT = 0  # SPEC table: normalised eigenvalues for omnivariance / eigenentropy
+CONV_DEFAULT = 0  # docs/features.md §3: normalised eigenvalues for omnivariance / eigenentropy
 CONV_CLOUDCOMPARE = 1  # CloudCompare / jakteristics: raw eigenvalues for omnivariance / eigenentropy
 CONV_PDAL = 2  # PDAL (SQRT mode) / pgeof: square roots of the eigenvalues in the ratio features
 CONVENTIONS = {"default": CONV_DEFAULT, "cloudcompare": CONV_CLOUDCOMPARE, "pdal": CONV_PDAL}
@@ -216,7 +216,7 @@ def eigh3(a00, a01, a02, a11, a12, a22, lam, v1, v3, want_v1=True):
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def eigen_features(lam, v3z, convention, col, out):
-    """Write the eigen and Westin features (SPEC §3) for eigenvalues ``lam``.
+    """Write the eigen and Westin features (docs/features.md §3) for eigenvalues ``lam``.
 
     ``v3z`` is the z component of the normal (for verticality); ``col`` maps
     feature slots to output columns (-1 = not requested).  Inlined into the

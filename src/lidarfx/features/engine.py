@@ -249,12 +249,12 @@ def _count_quadric(buf, cnt, r2, height, cylinder, v1, v2, nx_, ny_, nz_, r, dma
     return inl
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, nogil=True)
 def point_features(
-    pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
-    q,  # (m, 3) query points, local coordinates, in grid order
     start,  # first row of q to process
     stop,  # one past the last row
+    pts, cstart, cend, ckey, table, nx, ny, cell,  # the grid (lidarfx.neighbors.Grid)
+    q,  # (m, 3) query points, local coordinates, in grid order
     rad,  # (1 or m, S) radii per scale, ascending (one per point for kNN)
     kind,  # KIND_SPHERE / KIND_CYLINDER: neighbourhood of the covariance features
     height,  # half-height of the cylinder (inf = unbounded)
@@ -297,7 +297,7 @@ def point_features(
     shells = need_cyl and nscale > 1
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
-    for ch in nb.prange(nchunk):
+    for ch in range(nchunk):  # threads take ranges of rows (lidarfx._parallel)
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
         buf = np.empty((3, 1040))  # rows not 4 KiB apart (no 4K aliasing)

@@ -1,4 +1,4 @@
-"""Lang's height-difference histogram features (seed 001).
+"""Lang's height-difference histogram features (docs/features.md §3.7).
 
 dh = z_p − z_j over the vertical cylinder around p, scaled to [−1, 1] by
 max |dh| and binned into ``nbins`` equal bins (the engine does the binning in

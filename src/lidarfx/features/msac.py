@@ -31,10 +31,10 @@ def _splitmix(state):
     return state, z ^ (z >> np.uint64(31))
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, nogil=True)
 def msac_features(
-    pts, cstart, cend, ckey, table, nx, ny, cell,
-    q, start, stop, qid, rad, scale, kind, height, scanner, has_scanner,
+    start, stop, pts, cstart, cend, ckey, table, nx, ny, cell,
+    q, qid, rad, scale, kind, height, scanner, has_scanner,
     col, thr, min_iter, max_iter, seed, nbuf, out,
 ):
     """MSAC plane features for scale ``scale`` of ``rad`` for rows start..stop of ``q``
@@ -47,7 +47,7 @@ def msac_features(
     chunk = 256
     nchunk = (m + chunk - 1) // chunk
     thr2 = thr * thr
-    for ch in nb.prange(nchunk):
+    for ch in range(nchunk):  # threads take ranges of rows (lidarfx._parallel)
         lo = np.empty(nbuf, np.int64)
         hi = np.empty(nbuf, np.int64)
         buf = np.empty((3, 256))

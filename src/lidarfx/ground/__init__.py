@@ -19,7 +19,8 @@ import numpy as np
 from .. import progress as _progress
 from ..cloud import PointCloud
 from ..errors import LidarfxError
-from .dtm import cloud_crs, dtm, height_above_ground
+from ..crs import check_units, cloud_crs, unit_to_metre
+from .dtm import dtm, height_above_ground
 from .params import DEFAULTS
 from .evaluate import ground_errors
 from .raster import Raster
@@ -161,11 +162,9 @@ def classify_ground(
               "threshold": float(threshold), "scalar": float(scalar),
               "edge_step": float(edge_step), "edge_share": float(edge_share)}
     _check_params(params)
-    if units not in ("auto", "native"):
-        raise LidarfxError(f"units must be 'auto' or 'native', got {units!r}")
-    if units == "auto" and isinstance(cloud, PointCloud):
-        u = (cloud_crs(cloud) or {}).get("unit_to_metre")
-        if u and u > 0 and abs(u - 1.0) > 1e-9:
+    if check_units(units) == "auto" and isinstance(cloud, PointCloud):
+        u = unit_to_metre(cloud)
+        if abs(u - 1.0) > 1e-9:
             for name in ("cell", "window", "threshold", "scalar", "edge_step"):
                 params[name] /= u
     cell = params["cell"]
@@ -197,7 +196,7 @@ def classify_ground(
         )
     spec = GridSpec(local[:, :2], cell)
     radius = window_radius(window, cell, spec.nx, spec.ny)
-    with _progress.bar("ground (SMRF)", radius, _progress.wanted(progress, len(idx))) as advance:
+    with _progress.bar("ground (SMRF)", radius, _progress.wanted(progress)) as advance:
         ground, _ = smrf(local, advance=advance, offset=offset, **params)
     mask[idx] = ground
     return mask

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from ..cloud import PointCloud
+from ..crs import cloud_crs, unit_to_metre  # noqa: F401 - importable from here as before
 from ..errors import LidarfxError
 from .raster import Raster
 from .tin import TIN_TILE_POINTS, tin_interpolate
@@ -14,35 +15,6 @@ from .tin import TIN_TILE_POINTS, tin_interpolate
 __all__ = ["dtm", "height_above_ground", "ground_mask_of", "cloud_crs", "unit_to_metre"]
 
 GROUND_CLASS = 2
-
-
-def cloud_crs(cloud: PointCloud) -> dict[str, Any] | None:
-    """``{"wkt", "epsg", "geographic", "unit_to_metre"}`` from a LAS header, else ``None``."""
-    header = cloud.header
-    if header is None:
-        return None
-    try:
-        from ..io import las
-
-        if not isinstance(header, las.LasHeader):
-            return None
-        info = las.crs_info(header)
-    except Exception:  # a header we cannot read must not stop the DTM
-        return None
-    if not info:
-        return None
-    return {
-        "wkt": info.get("wkt"),
-        "epsg": info.get("epsg"),
-        "geographic": bool(info.get("geographic")),
-        "unit_to_metre": info.get("unit_to_metre"),
-    }
-
-
-def unit_to_metre(cloud: PointCloud) -> float:
-    """Metres per coordinate unit from the LAS header's CRS (1.0 for metres or an unknown unit)."""
-    u = (cloud_crs(cloud) or {}).get("unit_to_metre")
-    return float(u) if u and u > 0 else 1.0
 
 
 def ground_mask_of(cloud: PointCloud, ground: Any = None) -> np.ndarray:
@@ -92,6 +64,7 @@ def dtm(
     ground: Any = None,
     bounds: tuple[float, float, float, float] | None = None,
     crs: dict[str, Any] | None = None,
+    units: str = "auto",
 ) -> Raster:
     """DTM raster by linear (TIN) interpolation of the ground points at the cell centres.
 
@@ -102,7 +75,9 @@ def dtm(
         class 2 points; the raster covers the whole cloud) or an ``(n, 3)``
         array that holds ground points only (the raster covers them).
     resolution:
-        Cell edge in map units (default 1.0).
+        Cell edge (default 1.0): metres for a PointCloud source, converted to the map unit
+        when its LAS CRS names another linear unit (US survey feet, feet; ``units="native"``:
+        map units as given); map units for an array source (it has no CRS).
     ground:
         Boolean ground mask for a PointCloud source.
     bounds:
@@ -114,13 +89,16 @@ def dtm(
     -------
     Raster
         Grid aligned to multiples of ``resolution`` (so adjacent tiles line
-        up), row 0 = north.  A cell is the TIN height at its centre; cells
+        up), row 0 = north; ``Raster.resolution`` is in map units.  A cell is the TIN height at its centre; cells
         outside the convex hull of the ground points take the height of the
         nearest ground point (so every cell has a value).
     """
     check_resolution(resolution)
     xyz, mask, cloud = _as_cloud(source)
     if cloud is not None:
+        from ..crs import length_to_units
+
+        resolution = length_to_units(cloud, float(resolution), units)  # metres -> map units
         mask = ground_mask_of(cloud, ground)
         if crs is None:
             crs = cloud_crs(cloud)

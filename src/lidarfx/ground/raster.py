@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_path
+from ..crs import prj_text as _prj_text
 from ..errors import LidarfxError
 
 __all__ = ["Raster", "RASTER_EXTENSIONS"]
@@ -205,22 +206,6 @@ class Raster:
         if wkt:
             with atomic_path(p.with_suffix(".prj")) as tmp:
                 tmp.write_text(wkt)
-
-
-def _prj_text(crs: dict | None) -> str | None:
-    """The ``.prj`` of an ESRI grid: ESRI WKT1 of the CRS (from its WKT or EPSG code, by pyproj),
-    the WKT as it is when pyproj cannot convert it, None without a CRS."""
-    crs = crs or {}
-    wkt, epsg = crs.get("wkt"), crs.get("epsg")
-    if not wkt and not epsg:
-        return None
-    try:
-        from pyproj import CRS
-        from pyproj.enums import WktVersion
-
-        return CRS.from_user_input(wkt or int(epsg)).to_wkt(WktVersion.WKT1_ESRI)
-    except Exception:  # an unusual WKT pyproj does not read: written as the file has it
-        return wkt or None
 
 
 def _world_file(r: Raster) -> str:

@@ -49,9 +49,6 @@ FORMATS: dict[str, str] = {
 }
 """Lower-case file extension -> format module name."""
 
-AUTO_PROGRESS_POINTS = 2_000_000
-"""``progress=None`` shows a bar only above this many points (and only on a terminal)."""
-
 DENSITY_CELL_M = 1.0
 """Edge of the grid cells (metres) used for the occupied-area density."""
 
@@ -134,8 +131,8 @@ def _one_line(exc: BaseException) -> str:
 
 
 def progress_bar(total: int, description: str, enabled: bool | None):
-    """``lidarfx.progress.bar`` for reading/writing ``total`` points (automatic: large files on a terminal)."""
-    return _bar(description, total, _wanted(enabled, total, threshold=AUTO_PROGRESS_POINTS))
+    """``lidarfx.progress.bar`` for reading/writing ``total`` points (automatic: by the expected time, on a terminal)."""
+    return _bar(description, total, _wanted(enabled))
 
 
 def _normalise_columns(columns: str | Sequence[str] | None) -> list[str] | None:

@@ -26,7 +26,6 @@ Writing (rules in full in ``docs/io.md``)
 from __future__ import annotations
 
 import ctypes
-import re
 import struct
 from pathlib import Path
 from typing import Any, Callable, Iterator, NamedTuple
@@ -36,9 +35,9 @@ import lazrs
 import numpy as np
 from laspy import ExtraBytesParams, LasHeader, PointFormat
 from laspy.point import dims as _dims
-from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
 
 from ..cloud import PointCloud
+from ..crs import crs_info  # noqa: F401 - the CRS reading lives in lidarfx.crs
 from ..errors import LidarfxError
 from . import progress_bar
 
@@ -685,154 +684,6 @@ def write_records(path: Path, header: LasHeader, chunks, *, ext: str = ".las") -
 
 
 # ---------------------------------------------------------------- summaries
-_GEOTIFF_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048), 9003: ("US survey foot", 1200 / 3937)}
-_PROJECTED_CS_KEY, _GEOGRAPHIC_CS_KEY, _PROJ_LINEAR_UNITS_KEY = 3072, 2048, 3076
-_MODEL_TYPE_KEY, _MODEL_GEOGRAPHIC = 1024, 2
-_WKT_GEOGRAPHIC = ("GEOGCS", "GEOGCRS", "GEODCRS", "GEOCCS")
-_USER_DEFINED = 32767
-
-
-class _WktNode(NamedTuple):
-    keyword: str
-    args: list  # str (quoted), float/str (bare), or _WktNode
-
-
-def _parse_wkt(text: str) -> _WktNode | None:
-    """Parse WKT1/WKT2 into a tree of keyword nodes (enough to find units and IDs)."""
-    pos = 0
-
-    def skip() -> None:
-        nonlocal pos
-        while pos < len(text) and text[pos].isspace():
-            pos += 1
-
-    def node() -> _WktNode:
-        nonlocal pos
-        m = re.compile(r"[A-Za-z_][A-Za-z0-9_]*").match(text, pos)
-        if not m:
-            raise ValueError(f"WKT: keyword expected at {pos}")
-        pos = m.end()
-        skip()
-        if pos >= len(text) or text[pos] not in "[(":
-            raise ValueError("WKT: '[' expected")
-        close = "]" if text[pos] == "[" else ")"
-        pos += 1
-        args: list = []
-        while True:
-            skip()
-            ch = text[pos]
-            if ch == '"':
-                end = pos + 1
-                while True:
-                    end = text.index('"', end)
-                    if text.startswith('""', end):
-                        end += 2
-                        continue
-                    break
-                args.append(text[pos + 1 : end].replace('""', '"'))
-                pos = end + 1
-            elif ch.isalpha() and re.compile(r"[A-Za-z_][A-Za-z0-9_]*\s*[\[(]").match(text, pos):
-                args.append(node())
-            else:
-                m2 = re.compile(r"[^,\])]+").match(text, pos)
-                token = m2.group().strip() if m2 else ""
-                pos = m2.end() if m2 else pos
-                try:
-                    args.append(float(token))
-                except ValueError:
-                    args.append(token)
-            skip()
-            if text[pos] == ",":
-                pos += 1
-            elif text[pos] == close:
-                pos += 1
-                return _WktNode(m.group().upper(), args)
-            else:
-                raise ValueError(f"WKT: unexpected {text[pos]!r}")
-
-    try:
-        return node()
-    except (ValueError, IndexError):
-        return None
-
-
-def _wkt_epsg(node: _WktNode) -> int | None:
-    for arg in node.args:
-        if isinstance(arg, _WktNode) and arg.keyword in ("AUTHORITY", "ID") and len(arg.args) >= 2:
-            if str(arg.args[0]).upper() == "EPSG":
-                try:
-                    return int(float(arg.args[1]))
-                except ValueError:
-                    return None
-    return None
-
-
-def _wkt_linear_unit(node: _WktNode) -> tuple[str, float] | None:
-    """(name, metres per unit) of the horizontal axes: WKT1 ``UNIT`` under the root,
-    WKT2 ``LENGTHUNIT`` under the root or its ``AXIS`` nodes; ``None`` for geographic CRSs."""
-    if node.keyword in ("COMPD_CS", "COMPOUNDCRS"):
-        horizontal = next((a for a in node.args if isinstance(a, _WktNode)), None)
-        return _wkt_linear_unit(horizontal) if horizontal else None
-    if node.keyword in _WKT_GEOGRAPHIC:
-        return None
-    axes = [a for a in node.args if isinstance(a, _WktNode) and a.keyword == "AXIS"]
-    for parent in [node, *axes]:
-        for a in parent.args:
-            if isinstance(a, _WktNode) and a.keyword in ("UNIT", "LENGTHUNIT") and len(a.args) >= 2:
-                if isinstance(a.args[1], float):
-                    return str(a.args[0]), a.args[1]
-    return None
-
-
-def _all_vlrs(header: LasHeader) -> list:
-    return list(header.vlrs) + list(header.evlrs or [])
-
-
-def crs_info(header: LasHeader) -> dict[str, Any] | None:
-    """CRS of a LAS header: ``{wkt, epsg, linear_unit, unit_to_metre, geographic, sources}`` or ``None``.
-
-    WKT (OGC WKT VLR/EVLR) wins over GeoTIFF keys.  ``epsg`` is the root
-    authority code of the WKT, else the GeoTIFF projected / geographic CS key
-    (``None`` when user-defined).  ``unit_to_metre`` is the horizontal unit
-    (``None`` for geographic coordinates or when unknown); ``geographic`` is
-    true for longitude/latitude coordinates; ``sources`` lists the CRS records
-    found (``"wkt"``, ``"geotiff"``).
-    """
-    vlrs = _all_vlrs(header)
-    wkts = [v.string.strip("\x00 \r\n") for v in vlrs if isinstance(v, WktCoordinateSystemVlr)]
-    wkt = next((w for w in wkts if w), None)
-    keys: dict[int, int] = {}
-    for v in vlrs:
-        if isinstance(v, GeoKeyDirectoryVlr):
-            direct = (k for k in v.geo_keys if k.tiff_tag_location == 0 and k.id)  # value stored in the key
-            keys.update({int(k.id): int(k.value_offset) for k in direct})
-    if wkt is None and not keys:
-        return None
-    epsg, unit = None, None
-    tree = _parse_wkt(wkt) if wkt else None
-    if tree is not None:
-        epsg, unit = _wkt_epsg(tree), _wkt_linear_unit(tree)
-        geographic = tree.keyword in _WKT_GEOGRAPHIC
-    else:
-        geographic = keys.get(_MODEL_TYPE_KEY) == _MODEL_GEOGRAPHIC
-    if epsg is None:
-        for key in (_PROJECTED_CS_KEY, _GEOGRAPHIC_CS_KEY):
-            code = keys.get(key)
-            if code and code != _USER_DEFINED:
-                epsg = code
-                break
-    if unit is None and tree is None:
-        unit = _GEOTIFF_UNITS.get(keys.get(_PROJ_LINEAR_UNITS_KEY, -1))
-    return {
-        "wkt": wkt,
-        "epsg": epsg,
-        "linear_unit": unit[0] if unit else None,
-        "unit_to_metre": unit[1] if unit else None,
-        "geographic": geographic,
-        "sources": [k for k, found in (("wkt", wkt), ("geotiff", keys)) if found],
-    }
-
-
 def header_info(header: LasHeader) -> dict[str, Any]:
     """LAS header facts for :func:`lidarfx.io.info` (JSON-serialisable)."""
     pf = header.point_format

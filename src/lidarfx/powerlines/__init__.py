@@ -1,4 +1,4 @@
-"""Power lines (SPEC §6): wires, catenaries, spans, pylons, clearances and load cases.
+"""Power lines: wires, catenaries, spans, pylons, clearances and load cases.
 
 :func:`extract_powerlines` finds the conductors of an ALS corridor and fits one
 catenary per conductor and span (:mod:`.extract`, :mod:`.catenary`);

@@ -1,4 +1,4 @@
-"""One catenary per conductor and span, fitted robustly (SPEC §6, power lines).
+"""One catenary per conductor and span, fitted robustly (docs/powerlines.md).
 
 Frame (the convention of every catenary in lidarfx, also :mod:`lidarfx.synth.powerline`):
 ``s`` is the horizontal distance from the conductor's start attachment point

@@ -355,7 +355,7 @@ def extract_powerlines(
     """
     from ..features.api import feature_arrays, scale_suffix
     from ..ground import classify_ground
-    from ..ground.dtm import unit_to_metre
+    from ..crs import unit_to_metre
     from ..segment.components import linked_components
 
     if not isinstance(cloud, PointCloud):

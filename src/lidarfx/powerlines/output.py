@@ -80,7 +80,9 @@ def _flat(rec: dict[str, Any]) -> dict[str, Any]:
 
 
 def conductor_polylines(res: PowerLines, step: float = 0.5) -> list[Polyline]:
-    """The catenaries as :class:`~lidarfx.vector.Polyline` (kind ``wire``), one vertex every ``step``."""
+    """The catenaries as :class:`~lidarfx.vector.Polyline` (kind ``wire``), one vertex every ``step``
+    (m, converted to the cloud's unit as the extraction's lengths: ``res.meta["unit_to_metre"]``)."""
+    step = _step_in_units(res, step)
     out = []
     for cd in res.conductors:
         rec = conductor_record(cd)
@@ -90,6 +92,12 @@ def conductor_polylines(res: PowerLines, step: float = 0.5) -> list[Polyline]:
         out.append(Polyline(cd.curve(step), support=int(len(cd.index)), rms=float(cd.measures.get("rmse", math.nan)),
                             kind="wire", attrs=attrs))
     return out
+
+
+def _step_in_units(res: PowerLines, step: float) -> float:
+    """A vertex spacing in metres in the coordinate unit of the extraction's cloud."""
+    u = res.meta.get("unit_to_metre") or 1.0
+    return float(step) / float(u)
 
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -158,7 +166,7 @@ def load_case_records(res: PowerLines, cases: Sequence[Any], conductor: Any, *, 
                 rec["note"] = str(e)
                 out.append(rec)
                 continue
-            curve = st.curve(cd.start, cd.end, step)
+            curve = st.curve(cd.start, cd.end, _step_in_units(res, step))
             clear = curve[:, 2] - res.ground_z(curve[:, :2]) if res.ground_z is not None else None
             rec.update({
                 "temperature": _r(st.temperature2, 2), "a": _r(st.a2, 3), "swing_deg": _r(st.swing_deg, 3),

@@ -1,4 +1,4 @@
-"""Segmentation (SPEC §4): planes by surface growing against the segment plane.
+"""Segmentation (docs/segmentation.md): planes by surface growing against the segment plane.
 
 >>> import lidarfx
 >>> from lidarfx.segment import segment_planes, segments_table

@@ -1,4 +1,4 @@
-"""Plane segmentation by surface growing against the segment plane (SPEC §4, LIS seed 000).
+"""Plane segmentation by surface growing against the segment plane (LIS slides; docs/segmentation.md).
 
 Algorithm
 ---------
@@ -48,6 +48,7 @@ from ..cloud import PointCloud
 from ..errors import LidarfxError, check_int
 from ..features.eigen import eigh3
 from ..neighbors import NeighborIndex, column_ranges, ring_buffer_size
+from ..progress import stage, wanted
 from . import DEFAULTS, TABLE_COLUMNS
 
 __all__ = [
@@ -220,6 +221,7 @@ def segment_planes(
     features: dict[str, np.ndarray] | None = None,
     inplace: bool = False,
     progress: bool | None = None,
+    units: str = "auto",
 ) -> PointCloud:
     """Segment a cloud into planes by surface growing (LIS defaults for dense TLS).
 
@@ -267,6 +269,10 @@ def segment_planes(
     progress:
         Progress bar of the normal computation (default: on a terminal for
         large clouds).
+    units:
+        ``"auto"`` (default): ``normal_radius``, ``max_distance``, ``growing_radius`` and
+        ``min_width`` are metres, converted when the LAS header's CRS names another linear
+        unit (US survey feet, feet); ``"native"``: coordinate units as given.
 
     Returns
     -------
@@ -284,8 +290,15 @@ def segment_planes(
     n = len(cloud)
     if n == 0:
         raise LidarfxError("the point cloud is empty")
-    normal_radius = float(normal_radius)
-    growing_radius = float(growing_radius)
+    from ..crs import metres_per_unit
+
+    given = {"normal_radius": float(normal_radius), "max_distance": float(max_distance),
+             "growing_radius": float(growing_radius), "min_width": float(min_width)}
+    u = metres_per_unit(cloud, units)  # the lengths in coordinate units from here on
+    normal_radius = float(normal_radius) / u
+    growing_radius = float(growing_radius) / u
+    max_distance = float(max_distance) / u
+    min_width = float(min_width) / u
 
     # one index for the normals and the growing (cell = the larger radius)
     index = NeighborIndex(cloud.xyz, max(normal_radius, growing_radius))
@@ -311,11 +324,12 @@ def segment_planes(
 
     g = index.grid
     sizes = np.zeros(n, np.int64)
-    nseg = _grow(
-        *g, nrm, seeds, growing_radius, float(max_distance), math.cos(math.radians(float(max_angle))),
-        int(min_size), float(min_width), int(first_refit), float(refit_fraction), int(refit_max),
-        ring_buffer_size(growing_radius, g.cell), label, sizes,
-    )
+    with stage("segment: growing planes", wanted(progress)):
+        nseg = _grow(
+            *g, nrm, seeds, growing_radius, float(max_distance), math.cos(math.radians(float(max_angle))),
+            int(min_size), float(min_width), int(first_refit), float(refit_fraction), int(refit_max),
+            ring_buffer_size(growing_radius, g.cell), label, sizes,
+        )
     sizes = sizes[:nseg]
     # renumber: decreasing size, ties by creation order
     rank = np.argsort(-sizes, kind="stable")
@@ -337,17 +351,19 @@ def segment_planes(
     result.meta["segmentation"] = {
         "method": "surface growing against the segment plane",
         "parameters": {
-            "normal_radius": normal_radius,
-            "max_distance": float(max_distance),
-            "growing_radius": growing_radius,
+            "normal_radius": given["normal_radius"],
+            "max_distance": given["max_distance"],
+            "growing_radius": given["growing_radius"],
             "max_angle": float(max_angle),
             "min_size": int(min_size),
-            "min_width": float(min_width),
+            "min_width": given["min_width"],
             "scanner": None if scanner is None else [float(v) for v in scanner],
             "first_refit": int(first_refit),
             "refit_fraction": float(refit_fraction),
             "refit_max": int(refit_max),
         },
+        "lengths": "m" if units == "auto" else "coordinate units",
+        "unit_to_metre": u if units == "auto" else None,
         "segments": int(nseg),
         "points": n,
         "segmented_points": int((seg_id >= 0).sum()),
@@ -356,15 +372,52 @@ def segment_planes(
     return result
 
 
+def suggested_parameters(cloud: PointCloud, units: str = "auto") -> dict[str, float]:
+    """Lengths of :func:`segment_planes` that fit the cloud's point density (metres, or coordinate
+    units with ``units="native"``), and the point spacing they come from: a normal radius holding
+    about 20 points of a plane, a growing radius (and minimum width) holding about 12 — the LIS
+    defaults hold about that many on dense TLS; on an ALS roof at 3.4 pts/m² they give 1.4 m and
+    1.1 m — and a maximum distance of 0.10 m or a tenth of the normal radius, whichever is larger.
+    ``spacing`` is 1/√(points per unit area of a plane)."""
+    from ..crs import metres_per_unit
+    from ..neighbors import default_radius
+
+    r20 = default_radius(cloud, neighbours=20) * metres_per_unit(cloud, units)  # π r² ρ = 20
+
+    def nice(v: float) -> float:
+        return float(f"{v:.2g}")
+
+    growing = nice(r20 * math.sqrt(12 / 20))
+    return {"normal_radius": max(nice(r20), DEFAULTS["normal_radius"]),
+            "growing_radius": max(growing, DEFAULTS["growing_radius"]),
+            "max_distance": max(nice(r20 / 10), DEFAULTS["max_distance"]),
+            "min_width": growing,
+            "spacing": nice(r20 * math.sqrt(math.pi / 20))}
+
+
+def no_segments_hint(cloud: PointCloud, units: str = "auto") -> str:
+    """One line: no segment was found, the point spacing, and parameters that fit it."""
+    try:
+        p = suggested_parameters(cloud, units)
+    except LidarfxError:  # coincident points: nothing to suggest
+        return "no plane segment found"
+    unit = "m" if units == "auto" else "units"
+    return (f"no plane segment found: the points are about {p['spacing']:g} {unit} apart and the defaults are "
+            f"for dense TLS (about 1 cm); try --normal-radius {p['normal_radius']:g} --growing-radius "
+            f"{p['growing_radius']:g} --max-distance {p['max_distance']:g} --min-width {p['min_width']:g}")
+
+
 def segments_table(cloud: PointCloud, attribute: str = "segment_id") -> list[dict[str, Any]]:
     """One row per segment (ids ≥ 0, ascending): the plane refitted to all its points.
 
     Keys (see :data:`TABLE_COLUMNS`): ``id``, ``size``, ``centroid_x/y/z``
     (world coordinates), ``normal_x/y/z`` (unit, flipped up), ``dip`` and
-    ``dip_direction`` (degrees, SPEC §6), ``rms`` (RMS distance of the points
+    ``dip_direction`` (degrees, docs/conventions.md), ``rms`` (RMS distance of the points
     to the plane, m) and ``area`` (m², convex hull of the points projected
-    into the plane).
+    into the plane): metres also for a cloud whose LAS CRS is in feet.
     """
+    from ..crs import unit_to_metre
+
     from ..geometry import dip_from_normal, fit_plane, hull_area_in_plane
 
     ids = np.asarray(cloud[attribute]).astype(np.int64)
@@ -392,6 +445,8 @@ def segments_table(cloud: PointCloud, attribute: str = "segment_id") -> list[dic
             rms[k] = np.nan
         normals[k] = nv
         cents[k] = c + origin
+    u = unit_to_metre(cloud)
+    rms, areas = rms * u, areas * (u * u)
     okn = np.isfinite(normals).all(axis=1)
     dip = np.full(len(uniq), np.nan)
     ddir = np.full(len(uniq), np.nan)

@@ -1,4 +1,4 @@
-"""Unsupervised structure classification by eigenvalue signatures (doc 002, SPEC §5).
+"""Unsupervised structure classification by eigenvalue signatures (ISPRS 2016; docs/structures.md).
 
 Every point gets the label of the ideal structure whose reference signature is
 nearest to its own: plane, plane border, edge, corner, line, line end or volume;
@@ -12,7 +12,7 @@ nearest to its own: plane, plane border, edge, corner, line, line end or volume;
 
 The signature of a point at radius r is ``(e1, e2, e3, centroid_offset)``: the
 eigenvalues of the covariance of its sphere neighbourhood divided by their sum
-and ``|c − p| / r`` (SPEC §3).  The distance to a reference is a weighted
+and ``|c − p| / r`` (docs/features.md §3).  The distance to a reference is a weighted
 (diagonal Mahalanobis) distance: per component, the difference divided by the
 reference's spread, taken as the root mean square over the components (and
 over the radii of a multi-scale run), so ``distance = 1`` is one standard
@@ -29,6 +29,7 @@ from typing import Any, Sequence
 import numba as nb
 import numpy as np
 
+from .. import _parallel as parallel
 from ..cloud import PointCloud
 from ..errors import LidarfxError, check_int
 from ..neighbors import default_radius
@@ -114,16 +115,17 @@ def structure_signatures(xyz: np.ndarray, radii: Sequence[float], *, query_xyz: 
     cnt = np.empty((m, len(rs)))
     for s, r in enumerate(rs):
         sfx = "" if len(rs) == 1 else scale_suffix(r)
-        _signature_columns(f["eigenvalue1" + sfx], f["eigenvalue2" + sfx], f["eigenvalue3" + sfx],
-                           f["centroid_offset" + sfx], f["n_neighbours" + sfx], sig[:, s], cnt[:, s])
+        parallel.run(_signature_columns, len(sig), f["eigenvalue1" + sfx], f["eigenvalue2" + sfx],
+                     f["eigenvalue3" + sfx], f["centroid_offset" + sfx], f["n_neighbours" + sfx], sig[:, s], cnt[:, s],
+                     grain=65536)
         for name in ("eigenvalue1", "eigenvalue2", "eigenvalue3", "centroid_offset", "n_neighbours"):
             del f[name + sfx]  # free as we go (1 M points × 5 float32 per radius)
     return sig, cnt
 
 
-@nb.njit(cache=True, parallel=True)
-def _signature_columns(l1, l2, l3, co, nn, sig, cnt):
-    for i in nb.prange(l1.shape[0]):
+@nb.njit(cache=True, nogil=True)
+def _signature_columns(lo, hi, l1, l2, l3, co, nn, sig, cnt):
+    for i in range(lo, hi):
         a, b, c = float(l1[i]), float(l2[i]), float(l3[i])
         t = a + b + c
         if t > 0.0:
@@ -153,18 +155,19 @@ def _lerp_level(log_n, x):
     return lo, (x - log_n[lo]) / (log_n[lo + 1] - log_n[lo])
 
 
-@nb.njit(cache=True, parallel=True)
-def _classify_kernel(sig, cnt, cid, log_n, mean, std, n_classes, reject, min_n, label, conf, dist):
-    m, nr, nd = sig.shape
+@nb.njit(cache=True, nogil=True)
+def _classify_kernel(lo, hi, sig, cnt, cid, log_n, mean, std, n_classes, reject, min_n, label, conf, dist):
+    nr, nd = sig.shape[1], sig.shape[2]
     P = cid.shape[0]
-    for i in nb.prange(m):
+    valid = np.zeros(nr, np.bool_)
+    score = np.empty(n_classes)
+    for i in range(lo, hi):
         if cnt[i, nr - 1] < min_n:  # the widest sphere: too few points for any shape
             label[i] = 0
             conf[i] = np.nan
             dist[i] = np.nan
             continue
         # the radii that take part: enough points and a finite signature
-        valid = np.zeros(nr, np.bool_)
         used = 0
         for s in range(nr):
             ok = cnt[i, s] >= min_n
@@ -177,7 +180,7 @@ def _classify_kernel(sig, cnt, cid, log_n, mean, std, n_classes, reject, min_n, 
             conf[i] = np.nan
             dist[i] = np.nan
             continue
-        score = np.full(n_classes, np.inf)
+        score[:] = np.inf
         for p in range(P):
             tot = 0.0
             for s in range(nr):
@@ -242,7 +245,8 @@ def classify_signatures(sig: np.ndarray, cnt: np.ndarray, *, references: Any = "
     conf = np.empty(m, np.float32)
     dist = np.empty(m, np.float32)
     n_classes = int(max(STRUCTURE_IDS.values())) + 1
-    _classify_kernel(sig, cnt, cid, log_n, mean, std, n_classes, reject, float(min_n), label, conf, dist)
+    parallel.run(_classify_kernel, m, sig, cnt, cid, log_n, mean, std, n_classes, reject, float(min_n),
+                 label, conf, dist, grain=4096)
     return label, conf, dist
 
 
@@ -259,6 +263,7 @@ def classify_structures(
     keep_signature: bool = False,
     progress: bool | None = None,
     inplace: bool = False,
+    units: str = "auto",
 ) -> PointCloud:
     """Label every point with the ideal structure its neighbourhood resembles most.
 
@@ -268,14 +273,16 @@ def classify_structures(
         The point cloud.
     radius, radii:
         Sphere radius, or several (multi-scale: the distances of all radii are
-        combined).  Default: :func:`default_radius` (about 40 points on a plane).
+        combined), in metres: converted when the LAS header's CRS names another
+        linear unit (US survey feet, feet); ``units="native"``: coordinate units.
+        Default: :func:`default_radius` (about 40 points on a plane).
     references:
         ``"trained"`` (the shipped references generated on synthetic ideal
         structures), ``"analytic"`` (closed-form signatures of the ideal
         structures with the trained spreads), a references file written by
         ``lidarfx eigenclass-references``, or a :class:`References`.
     weighting:
-        ``"structure"``: each reference's own spread per component (doc 002's
+        ``"structure"``: each reference's own spread per component (ISPRS 2016's
         structure-dependent weighting); ``"uniform"``: one spread for every
         reference and component (a plain Euclidean distance).
     reject:
@@ -295,8 +302,9 @@ def classify_structures(
         (float32: the share of the nearest class in exp(−χ²/2) over all classes)
         and ``structure_distance`` (float32: the RMS distance to the nearest
         reference; NaN for isolated points).  ``meta["structures"]`` holds the
-        radii, parameters and the count per label.
+        radii (m), parameters and the count per label.
     """
+    from ..crs import metres_per_unit
     from ..features.api import radii_list, scale_suffix
 
     if not isinstance(cloud, PointCloud):
@@ -307,22 +315,26 @@ def classify_structures(
     refs.tables(kind, weighting)  # checks weighting before any work
     if len(cloud) == 0:
         raise LidarfxError("the point cloud is empty")
-    rs = radii_list(radius, radii)
+    u = metres_per_unit(cloud, units)
+    rs_m = radii_list(radius, radii)  # metres (units="auto")
+    rs = [r / u for r in rs_m]  # coordinate units
     if not rs:
         rs = [default_radius(cloud)]
+        rs_m = [float(f"{rs[0] * u:.4g}")]
     sig, cnt = structure_signatures(cloud.xyz, rs, progress=progress)
     label, conf, dist = classify_signatures(sig, cnt, references=refs if kind == "trained" else kind,
                                             weighting=weighting, reject=reject, min_neighbours=min_n)
     out = cloud if inplace else PointCloud(cloud.xyz, dict(cloud.attrs), cloud.header, cloud.meta)
     out.update({"structure": label, "structure_confidence": conf, "structure_distance": dist})
     if keep_signature:
-        for s, r in enumerate(rs):
+        for s, r in enumerate(rs_m):
             sfx = "" if len(rs) == 1 else scale_suffix(r)
             for j, name in enumerate(SIGNATURE):
                 out[name + sfx] = sig[:, s, j].astype(np.float32)
             out["n_neighbours" + sfx] = cnt[:, s].astype(np.float32)
     out.meta["structures"] = {
-        "radii": rs,
+        "radii": rs_m,
+        "radii_units": "m" if units == "auto" else "coordinate units",
         "references": _reference_name(references),
         "weighting": weighting,
         "reject": reject,

@@ -1,11 +1,11 @@
-"""Reference signatures of the ideal structures (doc 002), generated numerically.
+"""Reference signatures of the ideal structures (ISPRS 2016; docs/structures.md), generated numerically.
 
 A *signature* of a point is ``(e1, e2, e3, centroid_offset)`` of its sphere
 neighbourhood: the covariance eigenvalues normalised by their sum and the
 distance of the neighbourhood centroid from the point divided by the radius
-(SPEC §3, §5).  Both are invariant to position, rotation and scale.
+(docs/features.md §3, docs/conventions.md "Ideal structures").  Both are invariant to position, rotation and scale.
 
-The references are made the way doc 002 makes its training set: the ideal
+The references are made the way ISPRS 2016 makes its training set: the ideal
 structures of :mod:`lidarfx.synth` (plane, plane border, edge, corner, line,
 line end, volume) are sampled at several densities and noise levels with a
 random rotation each, and the signature of every sample's query point is
@@ -328,7 +328,7 @@ def generate_references(*, counts: Sequence[int] = COUNT_LEVELS, noise: Sequence
     mean = np.zeros((P, L, len(SIGNATURE)))
     std = np.zeros((P, L, len(SIGNATURE)))
     lam = np.zeros((P, L, 3))
-    with bar("references", P * L, wanted(progress, P * L, threshold=1)) as advance:
+    with bar("references", P * L, wanted(progress)) as advance:
         for p, (_, s, a) in enumerate(specs):
             for l, c in enumerate(counts):
                 r = sample_signatures(s, c, angle=a, noise=noise, samples=samples, angle_jitter=angle_jitter,

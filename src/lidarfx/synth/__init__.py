@@ -1,4 +1,4 @@
-"""Deterministic synthetic point clouds with ground truth (spec §8).
+"""Deterministic synthetic point clouds with ground truth (docs/synth.md).
 
 Every generator takes keyword arguments only (the ideal structures also accept
 ``radius`` positionally), is deterministic for a given ``seed``
@@ -23,6 +23,7 @@ powerline       ALS corridor: terrain, pylons, 3 spans × 3 catenary wires (bund
 tower           TLS lattice steel tower: legs, braces, arms, bolts
 terrain         ALS ground with a dike and a ditch and their breaklines
 house           ALS gable-roof house on ground with its ridge, eave and verge lines
+street          MLS street: road, facades both sides, poles, overhead wires, trees, cars
 ==============  =============================================================
 """
 from __future__ import annotations
@@ -34,6 +35,7 @@ from .facade import FACADE_CLASSES, facade
 from .house import HOUSE_CLASSES, house
 from .powerline import POWERLINE_CLASSES, catenary_through, catenary_z, powerline
 from .rockface import DEFAULT_JOINT_SETS, rockface
+from .street import STREET_CLASSES, street
 from .structures import (
     STRUCTURE_IDS,
     analytic_centroid_offset,
@@ -64,6 +66,7 @@ GENERATORS: dict[str, Callable[..., PointCloud]] = {
     "tower": tower,
     "terrain": terrain,
     "house": house,
+    "street": street,
 }
 """Generator name -> function (used by ``lidarfx synth``)."""
 
@@ -110,6 +113,7 @@ __all__ = [
     "tower",
     "terrain",
     "house",
+    "street",
     "analytic_eigenvalues",
     "analytic_centroid_offset",
     "density_for_count",
@@ -120,6 +124,7 @@ __all__ = [
     "FACADE_CLASSES",
     "HOUSE_CLASSES",
     "POWERLINE_CLASSES",
+    "STREET_CLASSES",
     "DEFAULT_JOINT_SETS",
     "PARTS",
     "LANDFORMS",

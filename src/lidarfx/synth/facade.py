@@ -1,4 +1,4 @@
-"""TLS house facade with the classes of Lang (seed 001): ground, wall, roof, window,
+"""TLS house facade with the classes of Lang (docs/synth.md §2): ground, wall, roof, window,
 vegetation, clutter, noise.
 
 Local frame: the facade wall is the plane y = 0 for 0 ≤ x ≤ width, the street

@@ -1,4 +1,4 @@
-"""ALS gable-roof house on flat ground with exact 3-D roof lines (seed 002).
+"""ALS gable-roof house on flat ground with exact 3-D roof lines (docs/synth.md §7).
 
 House frame (local metres, x = East, y = North, z = Up): ``u = (sin az, cos az, 0)``
 is the ridge direction (``azimuth`` clockwise from North) and ``v = (−cos az, sin az, 0)``

@@ -1,4 +1,4 @@
-"""ALS power-line corridor (LIS slides, seed 000): terrain, pylons, catenary wires, trees.
+"""ALS power-line corridor (after the LIS slides): terrain, pylons, catenary wires, trees.
 
 Optional parts for testing a wire extractor: bundled conductors (``bundle`` sub-conductors per
 phase), an earth (shield) wire on the pylon peaks and tower cranes beside the line whose long

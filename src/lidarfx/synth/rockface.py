@@ -1,4 +1,4 @@
-"""TLS rock face of planar facets from three known joint sets, with an overhang (seed 000).
+"""TLS rock face of planar facets from three known joint sets, with an overhang (after the LIS slides).
 
 Layout (local frame, x = East, y = North, z = Up): the cliff foot runs along the
 x axis, the face looks South (towards −y) at three scanners standing 25 m in

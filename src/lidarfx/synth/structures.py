@@ -1,4 +1,4 @@
-"""Ideal local structures around a query point at the origin (doc 002 reference shapes).
+"""Ideal local structures around a query point at the origin (the reference shapes of ISPRS 2016).
 
 Each generator samples one structure — plane, plane border, edge, corner, line,
 line end, volume — over the cube ``[-extent, extent]³`` (default

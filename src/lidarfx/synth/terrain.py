@@ -1,4 +1,4 @@
-"""ALS terrain with known structure lines (doc 004): a dike and a ditch.
+"""ALS terrain with known structure lines (Mandlburger & Briese 2009): a dike and a ditch.
 
 The surface is ``z = base(x, y) + dike(d₁) − ditch(d₂)``: a gently tilted,
 gently undulating base, a straight trapezoidal dike (flat crest, planar

@@ -1,4 +1,4 @@
-"""Lattice steel tower (LIS slides, seed 000): legs, bracings, cross arms and bolts.
+"""Lattice steel tower (after the LIS slides): legs, bracings, cross arms and bolts.
 
 :func:`lattice_members` builds the member skeleton (3-D segments) and is also
 used for the pylons of :func:`lidarfx.synth.powerline`; :func:`tower` samples

@@ -161,7 +161,7 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
     (``what``: the kind of task in messages and the progress bar, "chunk" or "merge")."""
     from ..progress import bar, wanted
 
-    show = wanted(progress, len(tasks), threshold=2)
+    show = wanted(progress)
     results: list[Any] = []
     if not tasks:
         return results
@@ -340,14 +340,21 @@ def run_tiled(
     memory), ``buffer`` (m; None: what the command needs), ``workers`` (None: one per core),
     ``scheduler`` (a ``dask.distributed`` address; None: embedded), ``resume`` (continue a
     killed run in the same work folder).  Every point's values equal those of one in-memory run
-    where the command says so (:attr:`Processor.identical`)."""
+    where the command says so (:attr:`Processor.identical`).  ``chunk_size``, ``buffer`` and the
+    lengths of ``options`` are metres, converted when the first input's CRS is in feet
+    (docs/conventions.md); the result gives ``chunk_size`` and ``buffer`` in metres."""
     from .processors import get
     from .split import split_inputs
+
+    from ..crs import inputs_unit_to_metre, length_to_units
 
     proc = get(command)
     proc.check(options)
     t0 = time.perf_counter()
     cat = open_catalog(inputs)
+    unit = inputs_unit_to_metre(inputs)  # metres per coordinate unit: sizes and buffers are metres
+    if proc.metres and "unit_to_metre" not in options:
+        options = {**options, "unit_to_metre": unit}
     out = Path(output)
     per_tile = out.suffix.lower() not in (".las", ".laz")
     if per_tile:
@@ -370,10 +377,11 @@ def run_tiled(
         for s in cat.sources:
             check_not_same_file(s.path, out)
     area = max(float((cat.maxs[0] - cat.mins[0]) * (cat.maxs[1] - cat.mins[1])), 1e-6)
-    need, exact = proc.buffer(options, cat.points / area)
-    if buffer is not None and exact and buffer < need:
-        raise LidarfxError(f"--buffer {buffer:g} is narrower than the {need:g} m the neighbourhoods of {command} reach; "
-                           f"results near chunk borders would differ")
+    need, exact = proc.buffer(options, cat.points / area)  # coordinate units
+    buffer, chunk_size = length_to_units(unit, buffer), length_to_units(unit, chunk_size)
+    if buffer is not None and exact and buffer < need * (1 - 1e-12):
+        raise LidarfxError(f"--buffer {buffer * unit:g} m is narrower than the {need * unit:g} m the neighbourhoods of "
+                           f"{command} reach; results near chunk borders would differ")
     buf = float(need if buffer is None else buffer)
     n_workers = default_workers() if workers is None else int(workers)
     if n_workers < 1:
@@ -391,7 +399,7 @@ def run_tiled(
 
         if (work / "split").exists():
             shutil.rmtree(work / "split")
-        with bar("splitting", cat.points, wanted(progress, cat.points)) as advance:
+        with bar("splitting", cat.points, wanted(progress)) as advance:
             split = split_inputs(cat, grid, work, advance)
     t1 = time.perf_counter()
     chunks = split["chunks"]
@@ -410,7 +418,8 @@ def run_tiled(
     if not keep_work:
         shutil.rmtree(work, ignore_errors=True)
     return TileRun(outputs=outputs, chunks=len(chunks), resumed=len(chunks) - len(todo), points=cat.points,
-                   chunk_size=grid.size, buffer=grid.buffer, workers=n_exec,
+                   chunk_size=float(f"{grid.size * unit:.12g}"), buffer=float(f"{grid.buffer * unit:.12g}"),
+                   workers=n_exec,
                    scheduler=scheduler or ("embedded LocalCluster" if n_exec > 1 else "this process"),
                    seconds={"split": round(t1 - t0, 3), "chunks": round(t2 - t1, 3), "merge": round(t3 - t2, 3)},
                    largest_chunk=max((c["buffered"] for c in chunks), default=0))

@@ -45,10 +45,13 @@ def eigenclass_options(radii, references="trained", weighting="structure", rejec
             try:
                 from .catalog import open_catalog
 
+                from ..crs import inputs_unit_to_metre
+
                 cat = open_catalog(inputs)
-                area = max(float((cat.maxs[0] - cat.mins[0]) * (cat.maxs[1] - cat.mins[1])), 1e-6)
+                u = inputs_unit_to_metre(inputs)
+                area = max(float((cat.maxs[0] - cat.mins[0]) * (cat.maxs[1] - cat.mins[1])), 1e-6) * u * u
                 rho = cat.points / area
-                hint = (f"; at the inputs' mean density ({rho:.3g} points per unit²) about "
+                hint = (f"; at the inputs' mean density ({rho:.3g} points per m²) about "
                         f"-r {float(f'{math.sqrt(40.0 / (math.pi * rho)):.2g}'):g} holds 40 points on a plane")
             except LidarfxError:
                 pass
@@ -65,8 +68,10 @@ def eigenclass_options(radii, references="trained", weighting="structure", rejec
 
 
 def eigenclass_buffer(o: dict, density: float) -> tuple[float, bool]:
-    """The largest radius (exact)."""
-    return float(max(o.get("radii") or [0.0])), True
+    """The largest radius (exact; metres in the options, coordinate units here)."""
+    from .processors import unit_of
+
+    return float(max(o.get("radii") or [0.0])) / unit_of(o), True
 
 
 def check_eigenclass_options(o: dict) -> None:
@@ -89,11 +94,14 @@ def eigenclass_process(chunk, ctx, o: dict):
     from ..structures import SIGNATURE, classify_signatures, structure_signatures
     from ..structures.references import resolve_references
 
+    from .processors import unit_of
+
     cloud, own = chunk.cloud, chunk.own
-    rs = radii_list(None, o["radii"])
+    rs = radii_list(None, o["radii"])  # metres: the names' suffixes
     result = cloud.subset(own)
     result.meta.pop("source", None)
-    sig, cnt = structure_signatures(cloud.xyz, rs, query_xyz=cloud.xyz[own], progress=False,
+    rs_units = [r / unit_of(o) for r in rs]
+    sig, cnt = structure_signatures(cloud.xyz, rs_units, query_xyz=cloud.xyz[own], progress=False,
                                     origin=np.asarray(ctx.mins, dtype=np.float64))
     refs, kind = resolve_references(o.get("references", "trained"))
     label, conf, dist = classify_signatures(sig, cnt, references=refs if kind == "trained" else kind,
@@ -395,6 +403,6 @@ def classify_process(chunk, ctx, o: dict):
 
 
 PROCESSORS = {
-    "eigenclass": Processor(eigenclass_buffer, eigenclass_process, check_eigenclass_options),
+    "eigenclass": Processor(eigenclass_buffer, eigenclass_process, check_eigenclass_options, metres=True),
     "classify": Processor(classify_buffer, classify_process, check_classify_options),
 }

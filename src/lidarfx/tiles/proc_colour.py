@@ -236,9 +236,12 @@ def colour_options(inputs, by: str = "morphology", *, radius: float | None = Non
 
 # --------------------------------------------------------------------------- the processor
 def colour_buffer(o: dict, density: float) -> tuple[float, bool]:
-    """The normals' radius when they are computed, else 0 (per point)."""
+    """The normals' radius when they are computed (metres in the options, coordinate units
+    here), else 0 (per point)."""
+    from .processors import unit_of
+
     if o.get("by") == "morphology" and o.get("normals") == "computed":
-        return float(o["radius"]), True
+        return float(o["radius"]) / unit_of(o), True
     return 0.0, True
 
 
@@ -279,9 +282,9 @@ def colour_process(chunk, ctx, o: dict):
     by = o["by"]
     if by == "morphology" and o.get("normals") == "computed":
         from ..features.registry import resolve
-        from .processors import chunk_feature_arrays
+        from .processors import chunk_feature_arrays, unit_of
 
-        f = chunk_feature_arrays(chunk, ctx, resolve(list(NORMAL_NAMES)), [float(o["radius"])],
+        f = chunk_feature_arrays(chunk, ctx, resolve(list(NORMAL_NAMES)), [float(o["radius"]) / unit_of(o)],
                                  scanner=o.get("scanner"))
         normals = np.column_stack([np.asarray(f[k], dtype=np.float64) for k in NORMAL_NAMES])
         c16 = to_uint16(morphology_rgb(normals, sun_azimuth=o.get("sun_azimuth", 315.0),
@@ -302,6 +305,6 @@ def colour_process(chunk, ctx, o: dict):
     return result
 
 
-PROCESSORS = {"colour": Processor(colour_buffer, colour_process, check_colour_options)}
+PROCESSORS = {"colour": Processor(colour_buffer, colour_process, check_colour_options, metres=True)}
 
 __all__ = ["PROCESSORS", "colour_options", "exact_percentiles"]

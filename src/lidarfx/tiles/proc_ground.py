@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from ..crs import inputs_unit_to_metre as unit_to_metre_of  # noqa: F401 - importable from here as before
 from ..errors import LidarfxError
 from .processors import Processor
 
@@ -43,21 +44,6 @@ def ground_options(params: dict, *, ignore_classes, hag: bool, inputs=None) -> d
     if inputs is not None:
         o["unit_to_metre"] = unit_to_metre_of(inputs)
     return o
-
-
-def unit_to_metre_of(inputs) -> float:
-    """Metres per coordinate unit of the first input's CRS (1.0 for metres or an unknown unit)."""
-    from ..io.las import crs_info, read_header
-    from .catalog import expand_inputs
-
-    try:
-        info = crs_info(read_header(expand_inputs(inputs)[0])) or {}
-    except LidarfxError:
-        raise
-    except Exception:  # a CRS we cannot read: metres, as classify_ground assumes
-        return 1.0
-    u = info.get("unit_to_metre")
-    return float(u) if u and u > 0 else 1.0
 
 
 def ground_buffer(o: dict, density: float) -> tuple[float, bool]:
@@ -122,4 +108,5 @@ def ground_process(chunk, ctx, o: dict):
     return result
 
 
-PROCESSORS = {"ground": Processor(ground_buffer, ground_process, check_ground_options, identical=False)}
+PROCESSORS = {"ground": Processor(ground_buffer, ground_process, check_ground_options, identical=False,
+                                  metres=True)}

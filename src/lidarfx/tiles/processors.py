@@ -3,6 +3,9 @@ chunk.  A processor takes a :class:`~lidarfx.tiles.engine.Chunk` (the buffered c
 points it owns, their global indices) and returns the owned points with the command's results.
 
 ``identical``: every point's values equal a single in-memory run's, bit for bit (tested).
+``metres``: the options' lengths are metres (docs/conventions.md); :func:`lidarfx.tiles.run_tiled`
+adds ``unit_to_metre`` (metres per coordinate unit of the first input) to the options, and the
+buffer and the processing convert with it.
 """
 from __future__ import annotations
 
@@ -21,15 +24,24 @@ class Processor:
     process: Callable[[Any, Any, dict], Any]
     check: Callable[[dict], None] = lambda o: None
     identical: bool = True
+    metres: bool = False
+
+
+def unit_of(o: dict) -> float:
+    """Metres per coordinate unit of a run (``o["unit_to_metre"]``, 1.0 when absent)."""
+    u = o.get("unit_to_metre") or 1.0
+    if isinstance(u, bool) or not isinstance(u, (int, float)) or not (math.isfinite(u) and u > 0):
+        raise LidarfxError(f"unit_to_metre must be a positive number, got {u!r}")
+    return float(u)
 
 
 # --------------------------------------------------------------------------- features
 def features_buffer(o: dict, density: float) -> tuple[float, bool]:
-    """The largest radius (exact).  kNN without a radius cap has no fixed reach: three times
-    the radius holding k points at the mean 2-D ``density``, and every chunk checks that its
-    points' k-th neighbours lie within (else a one-line error with the buffer needed).
-    Returns ``(buffer, exact)``."""
-    rs = o.get("radii") or []
+    """The largest radius (exact; metres in the options, coordinate units here).  kNN without a
+    radius cap has no fixed reach: three times the radius holding k points at the mean 2-D
+    ``density``, and every chunk checks that its points' k-th neighbours lie within (else a
+    one-line error with the buffer needed).  Returns ``(buffer, exact)``."""
+    rs = [float(r) / unit_of(o) for r in o.get("radii") or []]
     if o.get("neighbourhood") == "knn" and not rs:
         rk = math.sqrt(int(o.get("k") or 1) / (math.pi * max(density, 1e-12)))
         return float(f"{3.0 * rk:.2g}"), False
@@ -60,12 +72,13 @@ def check_features_options(o: dict) -> None:
 
 
 def chunk_feature_arrays(chunk, ctx, req, radii, *, neighbourhood: str = "sphere", k: int | None = None,
-                         **opts) -> dict[str, np.ndarray]:
+                         unit: float = 1.0, **opts) -> dict[str, np.ndarray]:
     """:func:`lidarfx.features.api.feature_arrays` of a chunk's owned points, with the whole
     cloud's index layout (origin = the global minimum, the global kNN cell) and global indices
     (MSAC's per-point random draws): the whole cloud's values, bit for bit.  ``opts`` go to
     ``feature_arrays``.  kNN without a radius cap checks that every k-th neighbour lies within
-    the buffer."""
+    the buffer (``unit``: metres per coordinate unit, for its message).  ``radii`` and the lengths
+    of ``opts`` are in coordinate units."""
     from ..features.api import feature_arrays, feature_index
 
     cloud, own = chunk.cloud, chunk.own
@@ -75,7 +88,7 @@ def chunk_feature_arrays(chunk, ctx, req, radii, *, neighbourhood: str = "sphere
     arrays = feature_arrays(cloud.xyz, req, radii=radii, neighbourhood=neighbourhood, k=k, query_xyz=q,
                             query_ids=chunk.ids[own], progress=False, index=index, **opts)
     if neighbourhood == "knn" and not radii:
-        _check_knn_reach(chunk, ctx, index, q, int(k))
+        _check_knn_reach(chunk, ctx, index, q, int(k), unit)
     return arrays
 
 
@@ -84,20 +97,29 @@ def features_process(chunk, ctx, o: dict):
     from ..features.api import _point_feature, radii_list
     from ..features.registry import resolve
 
+    from ..features.api import _scale_names
+
     cloud, own = chunk.cloud, chunk.own
     req = resolve(o.get("features"))
     result = cloud.subset(own)
     result.meta.pop("source", None)
     result.update({name: _point_feature(name, cloud)[own] for name in req.point})
     if req.slots:
-        result.update(chunk_feature_arrays(
-            chunk, ctx, req, radii_list(None, o.get("radii") or []), neighbourhood=o.get("neighbourhood", "sphere"),
-            k=o.get("k"), scanner=o.get("scanner"), height=o.get("height"), convention=o.get("convention", "default"),
-            d_max=o.get("d_max", 0.10), hist_bins=o.get("hist_bins", 10), seed=o.get("seed", 0)))
+        u = unit_of(o)  # the options are metres (as compute_features takes them)
+        rs = radii_list(None, o.get("radii") or [])
+        rs_units = [r / u for r in rs]
+        height = o.get("height")
+        arrays = chunk_feature_arrays(
+            chunk, ctx, req, rs_units, neighbourhood=o.get("neighbourhood", "sphere"),
+            k=o.get("k"), scanner=o.get("scanner"), height=None if height is None else float(height) / u,
+            convention=o.get("convention", "default"), d_max=float(o.get("d_max", 0.10)) / u,
+            hist_bins=o.get("hist_bins", 10), seed=o.get("seed", 0), unit=u)
+        rename = _scale_names(list(arrays), rs_units, rs, o.get("neighbourhood", "sphere"))
+        result.update({rename.get(n, n): v for n, v in arrays.items()})
     return result
 
 
-def _check_knn_reach(chunk, ctx, index, q: np.ndarray, k: int) -> None:
+def _check_knn_reach(chunk, ctx, index, q: np.ndarray, k: int, unit: float = 1.0) -> None:
     """Every owned point's k-th neighbour must lie within the buffer: else a one-line error
     with the buffer needed."""
     i, j = ctx.grid.cells(q[:, 0], q[:, 1])
@@ -109,12 +131,12 @@ def _check_knn_reach(chunk, ctx, index, q: np.ndarray, k: int) -> None:
     reach = np.where(np.isfinite(kd), kd, np.inf).max(axis=1)
     bad = reach > room
     if bad.any():
-        need = float((reach[bad] - room[bad]).max() + ctx.grid.buffer)
+        need = float((reach[bad] - room[bad]).max() + ctx.grid.buffer) * unit  # metres
         raise LidarfxError(f"the {k} nearest neighbours reach {need:.2f} m beyond the chunk; give --buffer {math.ceil(need)}")
 
 
 PROCESSORS: dict[str, Processor] = {
-    "features": Processor(features_buffer, features_process, check_features_options),
+    "features": Processor(features_buffer, features_process, check_features_options, metres=True),
 }
 """Commands that run in chunks, by name (those of other modules are added by :func:`get`)."""
 

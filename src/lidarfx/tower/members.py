@@ -173,6 +173,7 @@ def vectorise_members(
     join: float | None = None,
     seed: int = 0,
     progress: bool | None = None,
+    units: str = "auto",
 ) -> TowerMembers:
     """Straight members of a lattice structure as 3-D lines (module docstring for the steps).
 
@@ -207,7 +208,12 @@ def vectorise_members(
         points, grow over its joint and meet another member; default 4 × radius.
     seed:
         Seed of the RANSAC draws (results are deterministic).
+    units:
+        ``"auto"`` (default): the lengths (m) are converted when the cloud's LAS CRS names
+        another linear unit (US survey feet, feet); ``"native"``: coordinate units as given
+        (an array is in coordinate units).  ``meta`` gives them in metres.
     """
+    from ..crs import metres_per_unit
     from ..features import feature_arrays
     from ..neighbors import NeighborIndex
     from ..segment.components import linked_components
@@ -226,6 +232,9 @@ def vectorise_members(
     prm = check_parameters(radius=radius, threshold=threshold, min_linearity=min_linearity, max_angle=max_angle,
                            link=link, min_points=min_points, min_length=min_length, max_gap=max_gap,
                            merge_angle=merge_angle, join=join, seed=seed)
+    u = metres_per_unit(cloud if isinstance(cloud, PointCloud) else None, units)
+    for key in ("radius", "threshold", "link", "min_length", "max_gap", "join"):  # metres -> coordinate units
+        prm[key] = prm[key] / u
     r, thr, min_lin, max_angle = prm["radius"], prm["threshold"], prm["min_linearity"], prm["max_angle"]
     link, min_points, min_length, max_gap = prm["link"], prm["min_points"], prm["min_length"], prm["max_gap"]
     merge_angle, join, seed = prm["merge_angle"], prm["join"], prm["seed"]
@@ -319,10 +328,12 @@ def vectorise_members(
     t_end = time.perf_counter()
     counts = {lab: sum(1 for x in labels if x == lab) for lab in LABELS}
     meta = {
-        "radius": r,
-        "parameters": {"threshold": thr, "min_linearity": min_lin, "max_angle": max_angle, "link": link,
-                       "min_points": min_points, "min_length": min_length, "max_gap": max_gap,
-                       "merge_angle": merge_angle, "join": join, "seed": seed},
+        "radius": r * u,
+        "lengths": "m" if units == "auto" else "coordinate units",
+        "unit_to_metre": u if units == "auto" else None,
+        "parameters": {"threshold": thr * u, "min_linearity": min_lin, "max_angle": max_angle, "link": link * u,
+                       "min_points": min_points, "min_length": min_length * u, "max_gap": max_gap * u,
+                       "merge_angle": merge_angle, "join": join * u, "seed": seed},
         "points": int(n),
         "line_points": int(len(line_ids)),
         "clusters": n_clusters,
@@ -331,7 +342,7 @@ def vectorise_members(
         "labels": counts,
         "member_points": int((member_id >= 0).sum()),
         "nodes": int(sum(n0 + n1 for _, (n0, n1) in members)),
-        "total_length": round(float(sum(pl.length for pl in lines)), 3),
+        "total_length": round(float(sum(pl.length for pl in lines)) * u, 3),
         "seconds": {"features": round(t_feat - t_start, 3), "segments": round(t_seg - t_feat, 3),
                     "refit": round(t_fit - t_seg, 3), "labels": round(t_end - t_fit, 3)},
     }

@@ -1,7 +1,7 @@
 """Small parts of steel lattice towers: bolts and rivets, insulators, corona rings.
 
 Bolt heads and rivets stand a few millimetres off the flange they hold: they are
-found as compact groups of points far from their local plane (LIS seed 000: the
+found as compact groups of points far from their local plane (LIS slides: the
 standard deviation to the local plane).  Insulator strings and corona rings
 hang free of the lattice: they are compact groups of points of their own, told
 apart by the eigenvalues of their covariance (an insulator is long and round,
@@ -305,6 +305,7 @@ def detect_small_parts(
     compact_link: float | None = DEFAULTS["compact_link"],
     max_compact_size: float = DEFAULTS["max_compact_size"],
     progress: bool | None = None,
+    units: str = "auto",
 ) -> SmallParts:
     """Bolts and rivets (points standing off their local plane) and compact parts
     (insulators, corona rings, other free-standing groups) of a lattice tower.
@@ -333,6 +334,11 @@ def detect_small_parts(
         (default 6 × the point spacing) at most ``max_compact_size`` (3 m) across.
     progress:
         Progress bars of the feature computation.
+    units:
+        ``"auto"`` (default): the lengths are metres, converted when the LAS header's CRS
+        names another linear unit (US survey feet, feet); ``"native"``: coordinate units as
+        given.  The parts table and ``meta`` give lengths in metres, centroids in the cloud's
+        coordinates.
 
     Returns
     -------
@@ -340,6 +346,7 @@ def detect_small_parts(
         ``cloud`` with ``part_id``, ``part_kind``, ``part_score``; ``parts``
         (records with the keys of :data:`PART_COLUMNS`); ``meta``.
     """
+    from ..crs import metres_per_unit
     from ..features import feature_arrays
     from ..neighbors import NeighborIndex
     from ..segment.components import linked_components
@@ -350,6 +357,15 @@ def detect_small_parts(
     (radius, threshold, noise, min_points, min_size, max_size, link, compact_link,
      max_compact_size) = _check_params(radius, threshold, noise, min_points, min_size, max_size, link, compact_link,
                                        max_compact_size)
+    given = {"radius": radius, "noise": noise, "min_size": min_size, "max_size": max_size, "link": link,
+             "compact_link": compact_link, "max_compact_size": max_compact_size}
+    u = metres_per_unit(cloud, units)  # metres -> coordinate units from here on
+
+    def units_of(v):
+        return None if v is None else v / u
+
+    radius, noise, min_size, max_size = units_of(radius), units_of(noise), units_of(min_size), units_of(max_size)
+    link, compact_link, max_compact_size = units_of(link), units_of(compact_link), units_of(max_compact_size)
     if not isinstance(compact, (bool, np.bool_)):
         raise LidarfxError(f"compact must be true or false, got {compact!r}")
     n = len(cloud)
@@ -393,12 +409,12 @@ def detect_small_parts(
     offset = signed[:, None] * np.column_stack([feats[f"msac_normal_{a}"] for a in "xyz"]).astype(np.float64)
     planes = feats["n_neighbours"] >= _NOISE_NEIGHBOURS
     if not planes.any():
-        raise LidarfxError(f"no local plane at radius {radius:g} m: every sphere holds fewer than "
-                           f"{_NOISE_NEIGHBOURS} points of the cloud thinned to its spacing ({h:.3g} m); "
-                           f"raise the radius (-r) to at least {2.5 * h:.2g} m")
+        raise LidarfxError(f"no local plane at radius {radius * u:g} m: every sphere holds fewer than "
+                           f"{_NOISE_NEIGHBOURS} points of the cloud thinned to its spacing ({h * u:.3g} m); "
+                           f"raise the radius (-r) to at least {2.5 * h * u:.2g} m")
     if planes.mean() < 0.5:
-        warnings.warn(f"most spheres of radius {radius:g} m hold fewer than {_NOISE_NEIGHBOURS} points of the cloud "
-                      f"thinned to its spacing ({h:.3g} m): the cloud is too sparse for parts of this size; "
+        warnings.warn(f"most spheres of radius {radius * u:g} m hold fewer than {_NOISE_NEIGHBOURS} points of the "
+                      f"cloud thinned to its spacing ({h * u:.3g} m): the cloud is too sparse for parts of this size; "
                       f"a larger radius (-r) finds larger parts", LidarfxWarning, stacklevel=2)
     if noise is None:
         std = feats["msac_plane_std"][planes]
@@ -450,7 +466,12 @@ def detect_small_parts(
     for pid, (kind, idx) in enumerate(groups):
         part_id[idx] = pid
         part_kind[idx] = KINDS[kind]
-        parts.append(_record(pid, kind, local[idx], origin, score[idx], dist[idx]))
+        rec = _record(pid, kind, local[idx], origin, score[idx], dist[idx])
+        for key in ("size", "extent1", "extent2", "extent3", "standoff"):  # metres
+            rec[key] *= u
+        for key in ("eigenvalue1", "eigenvalue2", "eigenvalue3"):
+            rec[key] *= u * u
+        parts.append(rec)
     out = cloud.copy()
     out["part_id"] = part_id
     out["part_kind"] = part_kind
@@ -458,20 +479,23 @@ def detect_small_parts(
     counts = {k: sum(1 for p in parts if p["kind"] == k) for k in KINDS}
     meta = {
         "points": n,
-        "spacing": h,
-        "noise": sigma,
+        "lengths": "m" if units == "auto" else "coordinate units",
+        "unit_to_metre": u if units == "auto" else None,
+        "spacing": h * u,
+        "noise": sigma * u,
         "noise_from": "data" if noise is None else "given",
-        "resolution": resolution,
-        "cut": cut * sigma,
-        "link": link_used,
-        "compact_link": lc if compact else None,
+        "resolution": resolution * u,
+        "cut": cut * sigma * u,
+        "link": link_used * u,
+        "compact_link": lc * u if compact else None,
         "off_plane_points": int(len(cand)),
         "clusters": n_bolt_clusters,
         "counts": counts,
         "part_points": int(np.count_nonzero(part_id >= 0)),
-        "parameters": {"radius": radius, "threshold": threshold, "noise": noise, "min_points": min_points,
-                       "min_size": min_size, "max_size": max_size, "link": link, "compact": bool(compact),
-                       "compact_link": compact_link, "max_compact_size": max_compact_size},
+        "parameters": {"radius": given["radius"], "threshold": threshold, "noise": given["noise"],
+                       "min_points": min_points, "min_size": given["min_size"], "max_size": given["max_size"],
+                       "link": given["link"], "compact": bool(compact), "compact_link": given["compact_link"],
+                       "max_compact_size": given["max_compact_size"]},
         "kind_rules": KIND_RULES,
         "seconds": {"compact": round(t1 - t0, 3), "planes": round(t2 - t1, 3), "bolts": round(t3 - t2, 3)},
     }
