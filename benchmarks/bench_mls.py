@@ -6,6 +6,7 @@ synthetic MLS streets (issue 31, item 3).  Run by hand (not collected by pytest)
     python benchmarks/bench_mls.py --validation           # test on seed 2 instead (the tuning scene)
     python benchmarks/bench_mls.py --json mls.json        # also save every number
     python benchmarks/bench_mls.py --skip-peer            # lidarfx only
+    python benchmarks/bench_mls.py --also-rf              # + lidarfx with --classifier rf (an option)
 
 Scenes: ``lidarfx.synth.street(length=80, density=300, seed=…)`` — road and sidewalks, facades on
 both sides, lamp posts, utility poles and sign posts, overhead wires along and across the street,
@@ -111,7 +112,8 @@ def peer(train, test, cmap, seed: int, log) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- lidarfx
-def lidarfx_default(train, test, cmap, log) -> dict[str, Any]:
+def lidarfx_default(train, test, cmap, log, **options) -> dict[str, Any]:
+    """``lidarfx.classify.train`` with its defaults (``options``: e.g. ``classifier="rf"``), then predict."""
     import numpy as np
 
     from lidarfx.classify import train as fit
@@ -119,7 +121,7 @@ def lidarfx_default(train, test, cmap, log) -> dict[str, Any]:
 
     sec = {}
     t = time.perf_counter()
-    model = fit(train, classes=cmap, log=lambda m: log("  lidarfx " + m))
+    model = fit(train, classes=cmap, log=lambda m: log("  lidarfx " + m), **options)
     sec["train"] = time.perf_counter() - t
     t = time.perf_counter()
     rule: dict[str, Any] = {}
@@ -171,6 +173,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--validation", action="store_true",
                     help=f"test on the validation scene (seed {VALIDATION_SEED}) instead of the test scene")
     ap.add_argument("--skip-peer", action="store_true", help="lidarfx only")
+    ap.add_argument("--also-rf", action="store_true",
+                    help="also lidarfx with --classifier rf (its features, a random forest; an option, not the default)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the peer's random forest")
     ap.add_argument("--json", default=None, help="write every number to this JSON file")
     args = ap.parse_args(argv)
@@ -192,6 +196,12 @@ def main(argv: list[str] | None = None) -> int:
     res = lidarfx_default(train, test, cmap, log)
     res["load"] = [load0, load()]
     results["lidarfx default"] = res
+    if args.also_rf:
+        load0 = load()
+        log(f"lidarfx --classifier rf (load {load0:.2f})")
+        res = lidarfx_default(train, test, cmap, log, classifier="rf")
+        res["load"] = [load0, load()]
+        results["lidarfx rf"] = res
     if not args.skip_peer:
         load0 = load()
         log(f"peer: jakteristics {'/'.join(f'{r:g}' for r in PEER_RADII)} m + z + balanced RF (load {load0:.2f})")
@@ -207,6 +217,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nlidarfx: {lx['features']} features at radii {', '.join(f'{r:g}' for r in lx['radii'])} m "
           f"({lx['train_points']:,} training points); train {lx['seconds']['train']:.1f} s, predict "
           f"{lx['seconds']['predict']:.1f} s; load {lx['load'][0]:.2f} -> {lx['load'][1]:.2f}")
+    if "lidarfx rf" in results:
+        rf = results["lidarfx rf"]
+        print(f"lidarfx --classifier rf: train {rf['seconds']['train']:.1f} s, predict {rf['seconds']['predict']:.1f} s; "
+              f"load {rf['load'][0]:.2f} -> {rf['load'][1]:.2f}")
     if "peer" in results:
         pr = results["peer"]
         print(f"peer: {pr['features']} features ({pr['train_points']:,} training points); features "
@@ -215,7 +229,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"time ratio lidarfx / peer: {lx['seconds']['total'] / pr['seconds']['total']:.3f}")
         for c in THIN:
             a, b = lx["summary"]["classes"][c]["f1"], pr["summary"]["classes"][c]["f1"]
-            print(f"{c}: lidarfx F1 {a:.3f}, peer {b:.3f} -> {'lidarfx' if a > b else 'peer'} ahead by {abs(a - b):.3f}")
+            print(f"{c}: lidarfx default F1 {a:.4f}, peer {b:.4f} -> {'lidarfx' if a > b else 'peer'} ahead by "
+                  f"{abs(a - b):.4f}")
     if args.json:
         out = {"machine": platform.platform(), "cpus": os.cpu_count(), "args": vars(args), "test_seed": test_seed,
                "results": {k: {kk: vv for kk, vv in v.items()} for k, v in results.items()}}
