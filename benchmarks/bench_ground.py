@@ -106,7 +106,7 @@ def print_table(rows) -> None:
 
 def tuning(samples):
     """Total error of every grid set on every sample, the best set and leave-one-out."""
-    from lidarfx.ground.grid import bilinear, cell_index, gradient_slope
+    from lidarfx.surface.grid import bilinear, cell_index, gradient_slope
     from lidarfx.ground.smrf import provisional_dtm
 
     locals_ = [(n, b.xyz - b.xyz.min(axis=0), ref) for n, b, ref in samples]

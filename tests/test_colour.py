@@ -259,7 +259,7 @@ def test_rockface_joint_sets_get_their_orientation():
 
 # --------------------------------------------------------------------------- pictures
 def test_picture_views_and_zbuffer(tmp_path):
-    from lidarfx.colour import _projection, _zbuffer
+    from lidarfx.colour import _projection, zbuffer
 
     rng = np.random.default_rng(0)
     xy = rng.uniform(0, 50, (4000, 2))
@@ -273,7 +273,7 @@ def test_picture_views_and_zbuffer(tmp_path):
     colours = np.vstack([np.tile([1.0, 0.0, 0.0], (4000, 1)), np.tile([0.0, 0.0, 1.0], (4000, 1))])
     for view, top_colour in (("top", [0.0, 0.0, 1.0]),):
         pr = _projection(both, view)
-        img, cell, nu, nv, u0, v0 = _zbuffer(pr["u"], pr["v"], pr["near"], colours, 300)
+        img, cell, nu, nv, u0, v0 = zbuffer(pr["u"], pr["v"], pr["near"], colours, 300)
         painted = img.reshape(-1, 3)[~np.all(img.reshape(-1, 3) == 1.0, axis=1)]
         assert len(painted) > 0.9 * nu * nv  # the discs leave (almost) no holes
         np.testing.assert_array_equal(np.unique(painted, axis=0), [top_colour])
@@ -283,7 +283,7 @@ def test_picture_views_and_zbuffer(tmp_path):
                       np.column_stack([xz[:, 0], np.zeros(1000), xz[:, 1]])])      # in front: red
     pr = _projection(wall, "front")
     wall_colours = np.vstack([np.tile([0.0, 0.0, 1.0], (1000, 1)), np.tile([1.0, 0.0, 0.0], (1000, 1))])
-    img, *_ = _zbuffer(pr["u"], pr["v"], pr["near"], wall_colours, 200)
+    img, *_ = zbuffer(pr["u"], pr["v"], pr["near"], wall_colours, 200)
     painted = img.reshape(-1, 3)[~np.all(img.reshape(-1, 3) == 1.0, axis=1)]
     np.testing.assert_array_equal(np.unique(painted, axis=0), [[1.0, 0.0, 0.0]])  # y = 0 rows are red
     # the PNG itself

@@ -48,7 +48,7 @@ def test_ground_eval_takes_several_reference_classes(tmp_path, capsys):
 
 
 def test_dtm_ascii_grid_gets_a_prj_from_an_epsg_code(tmp_path):
-    from lidarfx.ground.raster import Raster
+    from lidarfx.surface.raster import Raster
 
     r = Raster(np.zeros((3, 4), np.float32), (500_000.0, 5_400_000.0), 1.0, {"epsg": 25832, "wkt": None})
     r.write(tmp_path / "dtm.asc")
@@ -129,6 +129,29 @@ def test_a_stage_shows_a_spinner_only_when_it_lasts(monkeypatch):
         time.sleep(0.3)
     assert [p.tasks[0][0] for p in _FakeProgress.started] == ["long"]
     assert progress.wanted(None) in (None, False) and progress.wanted(True) is True and progress.wanted(False) is False
+
+
+def test_cross_validation_names_each_fold_in_its_spinner(monkeypatch):
+    """`classify evaluate --cv` fits once per fold; each fit shows a spinner naming the fold (and
+    none when progress is off)."""
+    from lidarfx import progress
+    from lidarfx.classify import TrainConfig
+    from lidarfx.classify.evaluate import cross_validate
+
+    monkeypatch.setattr(progress, "_progress", lambda spinner=False: _FakeProgress())
+    monkeypatch.setattr(progress, "AUTO_AFTER", 0.0)
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(600, 3))
+    y = (X[:, 0] > 0).astype(np.int64)
+    folds = np.arange(600) % 3
+    cfg = TrainConfig(classifier="rf", n_estimators=5)
+    _FakeProgress.started = []
+    cross_validate(X, y, folds, cfg, 2, progress=True)
+    names = [p.tasks[0][0] for p in _FakeProgress.started]
+    assert [n.split(":")[0] for n in names] == ["fold 1 of 3", "fold 2 of 3", "fold 3 of 3"], names
+    _FakeProgress.started = []
+    cross_validate(X, y, folds, cfg, 2, progress=False)
+    assert _FakeProgress.started == []
 
 
 # ---------------------------------------------------------------- segmentation that fits the cloud

@@ -22,7 +22,7 @@ from lidarfx.ground import (
     ground_errors,
     height_above_ground,
 )
-from lidarfx.ground.tin import tin_interpolate
+from lidarfx.surface.tin import tin_interpolate
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 SAMPLES = ["samp11", "samp21", "samp23", "samp31", "samp41", "samp51", "samp53", "samp61"]
@@ -395,7 +395,7 @@ def _gappy_ground(seed: int, n: int = 6000):
 def test_tin_tiled_equals_one_piece(max_points, monkeypatch):
     import sys
 
-    tin_module = sys.modules["lidarfx.ground.tin"]
+    tin_module = sys.modules["lidarfx.surface.tin"]
     xy, z = _gappy_ground(1)
     rng = np.random.default_rng(2)
     q = rng.uniform([-30, -30], [230, 150], (10_000, 2))  # also far outside the hull, and in the holes
@@ -414,7 +414,7 @@ def test_tin_tiled_equals_one_piece(max_points, monkeypatch):
 
 
 def test_inpaint_from_border_cells_equals_all_known_cells():
-    from lidarfx.ground.grid import GridSpec, inpaint
+    from lidarfx.surface.grid import GridSpec, inpaint
 
     rng = np.random.default_rng(5)
     ny, nx = 120, 150
@@ -443,7 +443,7 @@ def test_height_above_ground_is_tiled_above_the_limit(monkeypatch):
     import sys
 
     dtm_module = sys.modules["lidarfx.ground.dtm"]  # lidarfx.ground.dtm is also the name of a function
-    tin_module = sys.modules["lidarfx.ground.tin"]
+    tin_module = sys.modules["lidarfx.surface.tin"]
 
     xy, z = _gappy_ground(3, 4000)
     rng = np.random.default_rng(4)

@@ -108,3 +108,39 @@ def test_a_first_run_loads_the_shipped_kernels_and_compiles_nothing(tmp_path):
     # a second process finds the kernels where they were put
     r2 = _fresh_run(tmp_path, code)
     assert r2.stdout.strip().splitlines()[-2:] == ["current", "[]"]
+
+
+def test_the_checks_agree_with_numba_without_importing_it(tmp_path, monkeypatch):
+    """The install decides without importing numba; what it reads must be what numba would say."""
+    import llvmlite.binding as ll
+    import numba
+    from types import SimpleNamespace
+
+    from numba.core.caching import CacheImpl
+
+    assert _prebuilt.numba_version() == numba.__version__
+    assert _prebuilt.process_triple() == ll.get_process_triple()
+    have = {k for k, v in ll.get_host_cpu_features().items() if v}
+    for feature in _prebuilt.CPU_NEEDS:
+        assert _prebuilt.host_supports((feature,)) == (feature in have), feature
+    fake = SimpleNamespace(__code__=SimpleNamespace(co_firstlineno=1))
+
+    def numba_path(py_file):
+        for cls in CacheImpl._locator_classes:
+            loc = cls.from_function(fake, str(py_file))
+            if loc is not None:
+                return Path(loc.get_cache_path())
+
+    src = tmp_path / "pkg" / "mod.py"
+    src.parent.mkdir()
+    src.write_text("x = 1\n")
+    assert _prebuilt.cache_path(src) == numba_path(src) == src.parent / "__pycache__"
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "nbcache"))
+    assert _prebuilt.cache_path(src) == numba_path(src) == tmp_path / "nbcache" / _prebuilt.cache_subpath(src)
+
+
+def test_importing_lidarfx_does_not_import_numba():
+    """`lidarfx --help` and scripts that only read files stay quick (numba takes ~0.5 s to import)."""
+    r = subprocess.run([sys.executable, "-c", "import sys, lidarfx; print('numba' in sys.modules)"],
+                       capture_output=True, text=True, timeout=120, check=True)
+    assert r.stdout.strip() == "False"

@@ -102,9 +102,9 @@ def test_a_top_view_of_a_north_rising_plane_is_high_at_the_top():
     xy = rng.uniform(0, 20, (20_000, 2))
     z = 0.5 * xy[:, 1]  # rises towards North
     cloud = PointCloud(np.column_stack([xy, z]))
-    from lidarfx.colour import _by_attribute
+    from lidarfx.colour import by_attribute
 
-    rgb, _ = _by_attribute(cloud, "z", "viridis", None)
+    rgb, _ = by_attribute(cloud, "z", "viridis", None)
     img = render_points(cloud.xyz, rgb, view="top", size=(200, 200), shading="none")
     shown = img.index >= 0
     assert shown.mean() > 0.97
@@ -160,13 +160,13 @@ def test_class_picture_lists_exactly_the_classes_present(tmp_path, monkeypatch):
     from lidarfx import render
 
     figures = []
-    real_save = render._save
+    real_save = render.save_figure
 
     def keep(fig, path, dpi):
         figures.append([t.get_text() for a in fig.axes if a.get_legend() for t in a.get_legend().get_texts()])
         return real_save(fig, path, dpi)
 
-    monkeypatch.setattr(render, "_save", keep)
+    monkeypatch.setattr(render, "save_figure", keep)
     cloud = _classified(np.random.default_rng(5))
     path, summary = render_picture(cloud, tmp_path / "cls.png", by="class", size=(480, 360), shading="none")
     assert [c["code"] for c in summary["colour"]["classes"]] == [2, 6, 9]
@@ -189,7 +189,7 @@ def test_class_picture_lists_exactly_the_classes_present(tmp_path, monkeypatch):
 def test_the_png_holds_the_rendered_pixels_one_to_one(tmp_path):
     from matplotlib.image import imread
 
-    from lidarfx.colour import _by_attribute
+    from lidarfx.colour import by_attribute
 
     rng = np.random.default_rng(8)
     cloud = PointCloud(rng.uniform(0, 10, (20_000, 3)), {"intensity": rng.uniform(0, 1, 20_000)})
@@ -197,7 +197,7 @@ def test_the_png_holds_the_rendered_pixels_one_to_one(tmp_path):
     png = np.round(imread(path)[..., :3] * 255).astype(int)
     assert png.shape == (555, 777, 3)
     w, h = s["frame"]["width"], s["frame"]["height"]
-    img = render_points(cloud.xyz, _by_attribute(cloud, "intensity", "viridis", None)[0], size=(w, h))
+    img = render_points(cloud.xyz, by_attribute(cloud, "intensity", "viridis", None)[0], size=(w, h))
     c0, r0 = s["picture_offset"]
     crop = png[r0:r0 + h, c0:c0 + w]
     inner = (slice(h // 6, -h // 6), slice(w // 6, -w // 6))  # inside the scale bar and the north arrow

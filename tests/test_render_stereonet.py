@@ -290,7 +290,7 @@ def test_set_view_png_and_legend(tmp_path):
 # ----------------------------------------------------------------------------- bad input
 
 
-def _one_line(excinfo):
+def one_line(excinfo):
     msg = str(excinfo.value)
     assert msg and "\n" not in msg
     return msg
@@ -322,7 +322,7 @@ def _one_line(excinfo):
 def test_bad_input_gives_a_one_line_error(tmp_path, call, needle):
     with pytest.raises(LidarfxError) as e:
         call(tmp_path / "x.png")
-    assert needle in _one_line(e)
+    assert needle in one_line(e)
     assert not (tmp_path / "x.png").exists()
 
 

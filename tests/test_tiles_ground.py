@@ -29,7 +29,7 @@ def scene(size: float = 200.0, density: float = 1.5, seed: int = 1) -> np.ndarra
     half = size / 2
     keep = np.ones(len(g), bool)
     parts = []
-    from lidarfx.ground.tin import tin_interpolate
+    from lidarfx.surface.tin import tin_interpolate
 
     n_b = int(size * size / 2500)
     for _ in range(n_b):

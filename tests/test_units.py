@@ -54,7 +54,8 @@ def feet_and_metres(tmp_path_factory):
 
 def test_crs_module_is_the_one_place_for_the_unit(feet_and_metres):
     from lidarfx import crs
-    from lidarfx.ground.dtm import cloud_crs, unit_to_metre  # the old places still import
+    from lidarfx.classify.pipeline import unit_to_metre
+    from lidarfx.ground.dtm import cloud_crs
     from lidarfx.io.las import crs_info
 
     _, feet, metres = feet_and_metres
@@ -188,3 +189,39 @@ def test_chunked_features_of_a_feet_file_are_metres(feet_and_metres, tmp_path, c
     assert main(["features", str(path), str(tmp_path / "narrow.las"), "-r", "0.6", "-f", "planarity",
                  "--chunk-size", "3", "--buffer", "0.5", "--workers", "1", "-q"]) == 2
     assert "--buffer 0.5 m is narrower than the 0.6 m" in capsys.readouterr().err
+
+
+def test_line_tables_of_a_feet_file_are_metres(feet_and_metres, tmp_path):
+    """Vector outputs keep the file's coordinates but give lengths and rms in metres, and say so."""
+    import csv
+
+    from lidarfx.crs import cloud_crs
+    from lidarfx.vector import Polyline, export_lines
+
+    path, feet, _ = feet_and_metres
+    line = Polyline(np.array([[0.0, 0, 0], [3000.0, 4000.0, 0]]), support=10, rms=1.0, kind="edge")  # 5000 ft
+    crs = cloud_crs(feet)
+    out = export_lines([line], geojson=tmp_path / "l.geojson", csv=tmp_path / "l.csv", json=tmp_path / "l.json",
+                       crs=crs)
+    row = next(csv.DictReader(open(out["csv"])))
+    assert float(row["length"]) == pytest.approx(5000 * US_FT, abs=1e-3)
+    assert float(row["rms"]) == pytest.approx(US_FT, abs=1e-4)
+    g = json.load(open(out["geojson"]))
+    assert g["features"][0]["geometry"]["coordinates"][1][:2] == [3000.0, 4000.0]  # coordinates stay feet
+    assert g["features"][0]["properties"]["length"] == pytest.approx(5000 * US_FT, abs=1e-3)
+    assert g["lidarfx"]["units"]["lengths"] == "m" and g["lidarfx"]["units"]["coordinates"] == "US survey ft"
+    assert json.load(open(out["json"]))["lines"][0]["length_2d"] == pytest.approx(5000 * US_FT, abs=1e-3)
+    # a metric file: unchanged, no units entry
+    out = export_lines([line], geojson=tmp_path / "m.geojson", crs={"epsg": 25832, "unit_to_metre": 1.0})
+    g = json.load(open(out["geojson"]))
+    assert g["features"][0]["properties"]["length"] == 5000.0 and "lidarfx" not in g
+
+
+def test_the_scale_bar_of_a_feet_file_is_metres(feet_and_metres, tmp_path):
+    """The picture of the same scene in feet and in metres gets the same scale bar, in metres."""
+    from lidarfx.render import render_picture
+
+    _, feet, metres = feet_and_metres
+    a = render_picture(feet, tmp_path / "f.png", size="300x200", progress=False)
+    b = render_picture(metres, tmp_path / "m.png", size="300x200", progress=False)
+    assert a[1]["scale_bar_m"] == b[1]["scale_bar_m"]

@@ -69,7 +69,7 @@ def test_crs_name_from_real_la93_header():
     if not LA93.exists():
         pytest.skip(f"real data not found: {LA93} (../shared/data/real)")
     import lidarfx
-    from lidarfx.ground.dtm import cloud_crs
+    from lidarfx.crs import cloud_crs
 
     crs = cloud_crs(lidarfx.read(LA93))
     assert crs is not None and crs["epsg"] == 2154

@@ -198,7 +198,7 @@ def _hex(rgb) -> str:
     return to_hex(tuple(float(v) for v in rgb))
 
 
-def _attribute(cloud: PointCloud, name: str) -> np.ndarray:
+def attribute_array(cloud: PointCloud, name: str) -> np.ndarray:
     if name in ("x", "y", "z") and name not in cloud:
         return getattr(cloud, name)
     if name not in cloud:
@@ -207,8 +207,8 @@ def _attribute(cloud: PointCloud, name: str) -> np.ndarray:
     return np.asarray(cloud[name])
 
 
-def _by_attribute(cloud, name, cmap, value_range) -> tuple[np.ndarray, dict]:
-    v = _attribute(cloud, name)
+def by_attribute(cloud, name, cmap, value_range) -> tuple[np.ndarray, dict]:
+    v = attribute_array(cloud, name)
     if v.dtype.kind not in "biuf":
         raise LidarfxError(f"attribute {name!r} is not numeric ({v.dtype}); it cannot be colour-mapped")
     cm = check_cmap(cmap)
@@ -234,7 +234,7 @@ def _by_attribute(cloud, name, cmap, value_range) -> tuple[np.ndarray, dict]:
     return rgb, meta
 
 
-def _by_set(cloud) -> tuple[np.ndarray, dict]:
+def by_set(cloud) -> tuple[np.ndarray, dict]:
     from .render.palette import set_colour, set_colours
 
     if "set_id" not in cloud:
@@ -255,7 +255,7 @@ def _by_set(cloud) -> tuple[np.ndarray, dict]:
     return rgb, {"sets": sets}
 
 
-def _by_class(cloud) -> tuple[np.ndarray, dict]:
+def by_class(cloud) -> tuple[np.ndarray, dict]:
     from .classify.classes import ASPRS_NAMES
 
     if "classification" not in cloud:
@@ -336,13 +336,13 @@ def colour_cloud(
         no_normal = ~np.all(np.isfinite(normals), axis=1) | ~np.any(normals != 0, axis=1)
         meta.update(sun_azimuth=az, sun_altitude=alt, no_normal=int(no_normal.sum()))
     elif by == "set":
-        rgb, m = _by_set(cloud)
+        rgb, m = by_set(cloud)
         meta.update(m)
     elif by == "class":
-        rgb, m = _by_class(cloud)
+        rgb, m = by_class(cloud)
         meta.update(m)
     else:
-        rgb, m = _by_attribute(cloud, by, cmap, value_range)
+        rgb, m = by_attribute(cloud, by, cmap, value_range)
         meta.update(m)
     out = cloud.copy()
     meta["replaced_colours"] = any(k in cloud for k in ("red", "green", "blue"))
@@ -411,7 +411,7 @@ def _morphology_key(ax, sun_azimuth: float, sun_altitude: float) -> None:
                  fontsize=7)
 
 
-def _zbuffer(u, v, near, colours, pixels: int):
+def zbuffer(u, v, near, colours, pixels: int):
     """Raster of about ``pixels`` cells along the longer side, drawn by the splat kernel
     (:func:`lidarfx.render.splat.splat`): every point covers a disc of
     :func:`~lidarfx.render.splat.auto_point_size` (1.5 × the median distance to its 4th nearest
@@ -466,7 +466,7 @@ def colour_picture(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .render import _offset_text, _save
+    from .render import offset_text, save_figure
 
     _check_view(view)
     if len(cloud) == 0:
@@ -482,7 +482,7 @@ def colour_picture(
     xyz = cloud.xyz[ok] - origin
     c = c[ok]
     pr = _projection(xyz, view)
-    img, cell, nu, nv, u0, v0 = _zbuffer(pr["u"], pr["v"], pr["near"], c, pixels)
+    img, cell, nu, nv, u0, v0 = zbuffer(pr["u"], pr["v"], pr["near"], c, pixels)
 
     meta = cloud.meta.get("colour") if key else None
     by = meta.get("by") if isinstance(meta, dict) else None
@@ -505,7 +505,7 @@ def colour_picture(
         world = float(origin[axis]) + m
         off = 0.0 if abs(world) < 1e4 else math.floor(world / 1000.0) * 1000.0
         lo.append(world - off)
-        texts.append(_offset_text(off))
+        texts.append(offset_text(off))
     ax.imshow(img, origin="lower", interpolation="nearest",
               extent=(lo[0], lo[0] + nu * cell, lo[1], lo[1] + nv * cell))
     ax.set_aspect("equal")
@@ -516,7 +516,7 @@ def colour_picture(
     seen = "seen from above" if look is None else f"looking towards {look:.0f}°"
     ax.set_title(f"{title}\n{seen}" if title else seen, fontsize=9)
     picture_key(fig, ax, kx, meta)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)
 
 
 def key_panel(meta) -> bool:

@@ -187,12 +187,12 @@ def read_near_section(path: str | os.PathLike, frame: SectionFrame, margin: floa
         raise LidarfxError(f"{p}: a column spec applies only to text and .npy files")
     import laspy
 
-    from .io import _one_line
+    from .io import one_line
 
     try:
         header = las.read_header(p)
     except las.READ_ERRORS as exc:
-        raise LidarfxError(f"cannot read {p}: {_one_line(exc)}") from exc
+        raise LidarfxError(f"cannot read {p}: {one_line(exc)}") from exc
     parts = [las.record_cloud(laspy.PackedPointRecord.empty(header.point_format), header)]  # names, even for no points
     with io.progress_bar(int(header.point_count), f"reading {p.name}", progress) as advance:
         for _, rec, hdr in las.iter_records(p):

@@ -401,9 +401,9 @@ def thin_file(
         try:
             header = las.read_header(src)
         except las.READ_ERRORS as exc:
-            from .io import _one_line
+            from .io import one_line
 
-            raise LidarfxError(f"cannot read {src}: {_one_line(exc)}") from exc
+            raise LidarfxError(f"cannot read {src}: {one_line(exc)}") from exc
         unit = units_summary(header if units == "auto" else None)
         idx, rows, n, facts = _winners_of_file(src, header, check_cell(length_to_units(header, cell, units)), keep,
                                                seed, chunk_points, progress,

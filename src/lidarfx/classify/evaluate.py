@@ -90,7 +90,7 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                    exclude: np.ndarray | None = None,
                    post: Callable[[int, Any, np.ndarray], np.ndarray] | None = None,
                    out_pred: np.ndarray | None = None, class_names: Sequence[str] | None = None,
-                   ) -> tuple[np.ndarray, list[dict[str, Any]], list]:
+                   progress: bool | None = False) -> tuple[np.ndarray, list[dict[str, Any]], list]:
     """Train on all folds but one (balanced sample, as :func:`train` does), predict the
     held-out fold, for every fold.  ``X_aug``: features of the same points in
     terrain-sheared copies, or ``(Xa, rows)`` pairs for copies holding only some of
@@ -102,12 +102,14 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
     e.g. the object-size rule, :class:`HeldOutRule`).  ``out_pred`` (length n), when given,
     receives every held-out point's predicted class index.  A fold whose training part lacks a
     class lists it (``class_names``, else indices) in ``not_trained``: that fold cannot predict it.
+    ``progress`` (:func:`lidarfx.progress.wanted`): a spinner naming the fold during each fit.
     Returns the summed confusion matrix,
     per-fold results and
     the fitted estimators with their held-out indices."""
     cm = np.zeros((n_classes, n_classes), np.int64)
     per_fold, fitted = [], []
-    for f in np.unique(folds):
+    fold_ids = np.unique(folds)
+    for i, f in enumerate(fold_ids):
         tr, te = fold_parts(folds, y, int(f), exclude)
         if not len(te):
             continue
@@ -131,7 +133,7 @@ def cross_validate(X: np.ndarray, y: np.ndarray, folds: np.ndarray, config: Trai
                 f" ({int((exclude[f] & (folds != f) & (y >= 0)).sum()):,} of its labelled points lie within the "
                 "buffer of the held-out part; use a smaller --buffer)")
             raise LidarfxError(f"fold {int(f)}: its training part holds fewer than two classes{near}")
-        est = config.fit_matrix(Xf, yf)
+        est = config.fit_matrix(Xf, yf, progress, step=f"fold {i + 1} of {len(fold_ids)}: ")
         pred = fast_predict(est, X[te]) if post is None else post(int(f), est, te)
         if out_pred is not None:
             out_pred[te] = pred
@@ -567,7 +569,7 @@ def evaluate(
             held = np.full(len(y), -1, np.int64)
             cm, per_fold, fitted = cross_validate(X, y, folds, cfg, k, log=say, X_aug=X_aug,
                                                   exclude=near.get(key), post=rule, out_pred=held,
-                                                  class_names=cmap.names)
+                                                  class_names=cmap.names, progress=progress)
             if key == "leave_one_file_out":
                 for pf in per_fold:
                     pf["file"] = srcs[pf["fold"]].name

@@ -175,7 +175,7 @@ def terrain_slope(cloud: "PointCloud") -> np.ndarray:
     (TIN of the SMRF ground points, :func:`lidarfx.ground.dtm`) in the point's cell.  The
     filter never looks at the classification; NaN for every point when it finds no ground."""
     from ..ground import classify_ground, dtm
-    from ..ground.grid import gradient_slope
+    from ..surface.grid import gradient_slope
 
     n = len(cloud)
     mask = classify_ground(cloud, ignore_classes=None, progress=False) if n else np.zeros(0, bool)

@@ -222,8 +222,9 @@ class TrainConfig:
     def feature_names(self) -> list[str]:
         return feature_list(self.features, self.radii, self.neighbourhood, self.k)[0]
 
-    def fit_matrix(self, X: np.ndarray, y: np.ndarray, progress: bool | None = None):
-        """Fit NaN handling + classifier on a feature matrix (class-balanced by sample weights)."""
+    def fit_matrix(self, X: np.ndarray, y: np.ndarray, progress: bool | None = None, step: str = ""):
+        """Fit NaN handling + classifier on a feature matrix (class-balanced by sample weights);
+        ``step`` names the run in the progress spinner (e.g. ``"fold 2 of 5: "``)."""
         from sklearn.pipeline import Pipeline
         from sklearn.utils.class_weight import compute_sample_weight
 
@@ -235,7 +236,7 @@ class TrainConfig:
         w = compute_sample_weight("balanced", y) if self.balance else None
         if w is not None and np.allclose(w, w[0]):
             w = None  # a balanced sample needs no weights (and weights double the boosting time)
-        with _fit_threads(self), stage(f"fitting {self.classifier} on {len(y):,} points", wanted(progress)):
+        with _fit_threads(self), stage(f"{step}fitting {self.classifier} on {len(y):,} points", wanted(progress)):
             tail.fit(X, y, classifier__sample_weight=w)
         return tail
 
@@ -407,11 +408,11 @@ class ClassifierModel:
             self._fast_cache = fast_estimator(self.estimator)
         return self._fast_cache
 
-    def _proba_matrix(self, X: np.ndarray) -> np.ndarray:
+    def proba_matrix(self, X: np.ndarray) -> np.ndarray:
         fast = self._fast()
         return fast.predict_proba(X) if fast is not None else self.estimator.predict_proba(X)
 
-    def _predict_matrix(self, X: np.ndarray) -> np.ndarray:
+    def predict_matrix(self, X: np.ndarray) -> np.ndarray:
         fast = self._fast()
         return fast.predict(X) if fast is not None else self.estimator.predict(X)
 
@@ -497,12 +498,12 @@ class ClassifierModel:
         chunk = int(chunk or PREDICT_CHUNK)
         tr = self.features
         tr.progress = progress
-        names, slots, point, rs = tr._plan()
+        names, slots, point, rs = tr.feature_plan()
         self.check(cloud)
         idx = np.arange(len(cloud)) if index is None else np.asarray(index)
         cache: dict = {}
         for a in range(0, len(idx), chunk):
-            yield slice(a, min(a + chunk, len(idx))), tr._matrix(CloudSample(cloud, idx[a:a + chunk]), names, slots,
+            yield slice(a, min(a + chunk, len(idx))), tr.feature_matrix(CloudSample(cloud, idx[a:a + chunk]), names, slots,
                                                                   point, rs, cache)
 
     def feature_matrix(self, cloud: PointCloud, index: np.ndarray | None = None, chunk: int | None = None,
@@ -524,7 +525,7 @@ class ClassifierModel:
         sub = cloud if usable.all() else cloud.subset(usable)
         proba = np.empty((len(sub), len(self.classes)), dtype=np.float64)
         for rows, X in self.feature_chunks(sub, progress=progress):
-            proba[rows] = self._proba_matrix(X)
+            proba[rows] = self.proba_matrix(X)
         return proba, usable
 
     @property
@@ -588,9 +589,9 @@ class ClassifierModel:
         every = np.empty((len(sub), len(self.classes)), dtype=np.float32) if return_proba else None
         for rows, X in self.feature_chunks(sub, progress=progress):  # bounded memory on large clouds
             if best is None and alt is None and every is None:
-                k[rows] = self._predict_matrix(X)
+                k[rows] = self.predict_matrix(X)
                 continue
-            proba = self._proba_matrix(X)
+            proba = self.proba_matrix(X)
             k[rows] = proba.argmax(axis=1)
             if every is not None:
                 every[rows] = proba

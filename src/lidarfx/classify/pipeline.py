@@ -32,7 +32,7 @@ from ..cloud import PointCloud, measurement_flags
 from ..errors import LidarfxError, LidarfxWarning
 from ..features.api import check_options, radii_list, scale_suffix
 from ..features import slots as S
-from ..ground.dtm import unit_to_metre
+from ..crs import unit_to_metre
 
 __all__ = [
     "CloudSample",
@@ -369,7 +369,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         self.progress = progress
 
     # ------------------------------------------------------------------ sklearn API
-    def _plan(self):
+    def feature_plan(self):
         if self.ground not in ("smrf", "class", "attribute"):
             raise LidarfxError(f"ground must be 'smrf', 'class' or 'attribute', got {self.ground!r}")
         if self.hag_cap is not None and not (self.hag_cap > 0):
@@ -380,7 +380,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         return names, slots, point, rs
 
     def fit(self, X: Any = None, y: Any = None) -> "LidarFeatures":
-        names, *_ = self._plan()
+        names, *_ = self.feature_plan()
         self.feature_names_out_ = np.asarray(names, dtype=object)
         self.n_features_out_ = len(names)
         return self
@@ -393,7 +393,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
     def transform(self, X: Any) -> np.ndarray:
         if not hasattr(self, "feature_names_out_"):
             self.fit()
-        names, slots, point, rs = self._plan()
+        names, slots, point, rs = self.feature_plan()
         if isinstance(X, np.ndarray) and X.ndim == 2:
             if X.shape[1] != len(names):
                 raise LidarfxError(f"feature matrix has {X.shape[1]} columns, the transformer makes {len(names)}")
@@ -402,7 +402,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         if not samples:
             return np.empty((0, len(names)), np.float32)
         cache: dict[int, Any] = {}
-        blocks = [self._matrix(s, names, slots, point, rs, cache) for s in samples]
+        blocks = [self.feature_matrix(s, names, slots, point, rs, cache) for s in samples]
         return np.vstack(blocks) if len(blocks) > 1 else blocks[0]
 
     def __sklearn_tags__(self):
@@ -426,7 +426,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
 
     def check_cloud(self, cloud: PointCloud, name: str = "the cloud") -> None:
         """Refuse a cloud that lacks a field the features need (clear one-line error)."""
-        names, *_ = self._plan()
+        names, *_ = self.feature_plan()
         for feat in names:
             for field in _NEEDS.get(feat, ()):
                 if not _has_field(cloud, field):
@@ -466,7 +466,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
         thinned (``max_disc_points`` per disc of the smallest radius ``rs[0]``; None: never) and
         the fewest points a thinned neighbour cloud keeps (:func:`thinning_mask`)."""
         if rs is None:
-            rs = self._plan()[3]
+            rs = self.feature_plan()[3]
         limit = None
         if self.max_disc_points is not None and rs:
             limit = float(self.max_disc_points) / (math.pi * rs[0] * rs[0])  # float: no OverflowError
@@ -493,7 +493,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
     def features_command(self) -> str:
         """The ``lidarfx features`` command that writes every neighbourhood feature this transformer
         reads (whole groups: a superset), for ``--precomputed``."""
-        _, slots, _, rs = self._plan()
+        _, slots, _, rs = self.feature_plan()
         groups = [g for g, members in S.GROUPS.items() if set(members) & set(slots)]
         args = ["lidarfx features IN OUT"]
         if self.neighbourhood != "sphere":
@@ -519,7 +519,7 @@ class LidarFeatures(TransformerMixin, BaseEstimator):
             cache[key] = hag(cloud, self.ground) * np.float32(unit)
         return cache[key]
 
-    def _matrix(self, sample: "CloudSample", names, slots, point, rs, cache) -> np.ndarray:
+    def feature_matrix(self, sample: "CloudSample", names, slots, point, rs, cache) -> np.ndarray:
         from ..features.api import feature_arrays, feature_index
         from ..features.registry import Request
 

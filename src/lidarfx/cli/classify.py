@@ -449,7 +449,7 @@ def _predict_tiles(args) -> int:
 
     from ..classify.model import DENSITY_WARN_RATIO
     from ..errors import LidarfxError, LidarfxWarning
-    from ..tiles.proc_classes import _model, classify_options
+    from ..tiles.proc_classes import tile_model, classify_options
 
     if args.picture:
         raise LidarfxError("--picture draws the whole cloud, not in chunks: leave it out or use --chunk-size 0")
@@ -457,7 +457,7 @@ def _predict_tiles(args) -> int:
                             confidence=args.confidence, probabilities=args.probabilities,
                             min_building_area=args.min_building_area,
                             max_multi_return_share=args.max_multi_return_share)
-    ref = _model(opts).training_density
+    ref = tile_model(opts).training_density
     d = opts.get("density")
     if ref and d is not None and d < DENSITY_WARN_RATIO * ref:
         warnings.warn(f"{args.input}: {d:.1f} points/m² is {d / ref:.0%} of the sparsest training file's {ref:.1f}; "

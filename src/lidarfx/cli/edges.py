@@ -64,7 +64,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from .. import io
     from ..edges import extract_edges
-    from ..crs import cloud_crs
+    from ..crs import cloud_crs, unit_to_metre
     from ..vector import export_lines
 
     paths = line_output_paths(args, "lines")
@@ -96,11 +96,12 @@ def run(args) -> int:
         if paths["picture"]:
             written["picture"] = paths["picture"]
     t3 = time.perf_counter()
+    u = unit_to_metre(cloud)  # lengths of the summary in metres (docs/conventions.md)
     kinds: dict[str, dict[str, float]] = {}
     for pl in res.lines:
         k = kinds.setdefault(pl.kind, {"lines": 0, "length": 0.0})
         k["lines"] += 1
-        k["length"] = round(k["length"] + pl.length, 3)
+        k["length"] = round(k["length"] + pl.length * u, 3)
     summary = {
         "input": str(args.input),
         "outputs": written,
@@ -113,8 +114,8 @@ def run(args) -> int:
         "lines": len(res.lines),
         "total_length": res.meta["total_length"],
         "kinds": kinds,
-        "longest": [{"kind": pl.kind, "length": round(pl.length, 3), "support": pl.support,
-                     "rms": None if pl.rms != pl.rms else round(pl.rms, 4), "vertices": pl.n_vertices}
+        "longest": [{"kind": pl.kind, "length": round(pl.length * u, 3), "support": pl.support,
+                     "rms": None if pl.rms != pl.rms else round(pl.rms * u, 4), "vertices": pl.n_vertices}
                     for pl in res.lines[:10]],
         "parameters": res.meta["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},

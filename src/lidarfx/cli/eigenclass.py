@@ -110,14 +110,14 @@ def register(sub) -> None:
 def run(args) -> int:
     from .. import io
     from ..structures import LABELS, classify_structures
-    from ..structures import _check_min_neighbours, _check_reject
+    from ..structures import check_min_neighbours, check_reject
     from ..structures.references import resolve_references
 
     if args.picture:
         check_picture_path(args.picture)
     report = ReportJob(args)
-    _check_reject(args.reject)
-    _check_min_neighbours(args.min_neighbours)
+    check_reject(args.reject)
+    check_min_neighbours(args.min_neighbours)
     refs, kind = resolve_references(args.references)  # a bad file is refused before reading the cloud
     refs.tables(kind, args.weighting)
     if wants_tiles(args, "eigenclass", by_size=args.radius is not None):

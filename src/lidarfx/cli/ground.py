@@ -91,7 +91,7 @@ def _add_params(p) -> None:
 
 def _params(args) -> dict:
     """The SMRF options, checked at once (also where they go unused: ``dtm`` without ``--classify``)."""
-    from ..ground import _check_params, check_ignore_classes
+    from ..ground import check_params, check_ignore_classes
 
     p = {
         "cell": args.cell,
@@ -102,7 +102,7 @@ def _params(args) -> dict:
         "edge_step": args.edge_step,
         "edge_share": args.edge_share,
     }
-    _check_params(p)
+    check_params(p)
     check_ignore_classes(args.ignore_classes)
     return {**p, "last_returns": not args.all_returns}
 
@@ -170,7 +170,7 @@ def _check_raster_path(path: str) -> None:
 
     from .._atomic import check_output_folder
     from ..errors import LidarfxError
-    from ..ground.raster import RASTER_EXTENSIONS
+    from ..surface.raster import RASTER_EXTENSIONS
 
     if Path(path).suffix.lower() not in RASTER_EXTENSIONS:
         raise LidarfxError(f"{path}: DTM output must end in {', '.join(RASTER_EXTENSIONS)}")

@@ -66,7 +66,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from .. import io
-    from ..crs import cloud_crs
+    from ..crs import cloud_crs, unit_to_metre
     from ..tower.members import check_parameters, vectorise_members
     from ..vector import export_lines
 
@@ -105,11 +105,12 @@ def run(args) -> int:
         if paths["picture"]:
             written["picture"] = paths["picture"]
     t3 = time.perf_counter()
+    u = unit_to_metre(cloud)  # lengths of the summary in metres (docs/conventions.md)
     labels: dict[str, dict[str, float]] = {}
     for pl in res.lines:
         k = labels.setdefault(str(pl.attrs["label"]), {"members": 0, "length": 0.0})
         k["members"] += 1
-        k["length"] = round(k["length"] + pl.length, 3)
+        k["length"] = round(k["length"] + pl.length * u, 3)
     summary = {
         "input": str(args.input),
         "outputs": written,
@@ -123,8 +124,8 @@ def run(args) -> int:
         "nodes": res.meta["nodes"],
         "total_length": res.meta["total_length"],
         "labels": labels,
-        "longest": [{"label": pl.attrs["label"], "length": round(pl.length, 3), "support": pl.support,
-                     "rms": None if pl.rms != pl.rms else round(pl.rms, 4), "inclination": pl.attrs["inclination"]}
+        "longest": [{"label": pl.attrs["label"], "length": round(pl.length * u, 3), "support": pl.support,
+                     "rms": None if pl.rms != pl.rms else round(pl.rms * u, 4), "inclination": pl.attrs["inclination"]}
                     for pl in res.lines[:10]],
         "parameters": res.meta["parameters"],
         "seconds": {"read": round(t1 - t0, 3), **res.meta["seconds"], "write": round(t3 - t2, 3)},

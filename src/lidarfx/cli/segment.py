@@ -96,10 +96,10 @@ def run(args) -> int:
     if args.picture:
         check_picture_path(args.picture)
     report = ReportJob(args)
-    from ..segment.planes import _check_params
+    from ..segment.planes import check_params
 
     # the library's checks, before reading the cloud
-    _check_params(args.normal_radius, args.max_distance, args.growing_radius, args.max_angle, args.min_size,
+    check_params(args.normal_radius, args.max_distance, args.growing_radius, args.max_angle, args.min_size,
                   args.min_width)
     if isinstance(inputs_of(args.input), list) or Path(args.input).is_dir():
         from ..errors import LidarfxError

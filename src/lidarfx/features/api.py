@@ -104,7 +104,7 @@ def _lengths(cloud: PointCloud, units: str, rs: list[float], height, d_max, msac
             length_to_units(u, msac_threshold))
 
 
-def _scale_names(names: list[str], rs_units: list[float], rs: list[float], neighbourhood: str) -> dict[str, str]:
+def scale_names(names: list[str], rs_units: list[float], rs: list[float], neighbourhood: str) -> dict[str, str]:
     """Attribute names of the radii in coordinate units -> names of the same radii in metres
     (the multi-scale suffix names the radius as the user gave it)."""
     if neighbourhood == "knn" or len(rs) < 2 or rs_units == rs:
@@ -434,11 +434,11 @@ def compute_features(
         seed=seed,
         progress=progress,
     )
-    rename = _scale_names(list(arrays), rs_units, rs, neighbourhood)
+    rename = scale_names(list(arrays), rs_units, rs, neighbourhood)
     if rename:
         arrays = {rename.get(n, n): v for n, v in arrays.items()}
     msgs = _nan_check(arrays, cloud.xyz, rs, neighbourhood, unit, None if qi is None else cloud.xyz[qi])
-    point = {name: _point_feature(name, cloud) for name in req.point}
+    point = {name: point_feature(name, cloud) for name in req.point}
     if qi is not None:
         result = cloud.subset(qi)
         point = {k: v[qi] for k, v in point.items()}
@@ -495,7 +495,7 @@ def stream_features(
     if req.slots:
         _check_not_empty(cloud.xyz)
     index = feature_index(cloud.xyz, neighbourhood, k, rs_units, req) if req.slots else None
-    point = {name: _point_feature(name, cloud) for name in req.point}
+    point = {name: point_feature(name, cloud) for name in req.point}
     names = list(req.point)
     if req.slots:
         suffixes = [""] if neighbourhood == "knn" else _suffixes(rs)
@@ -517,7 +517,7 @@ def stream_features(
             arrays = feature_arrays(cloud.xyz, req, query_xyz=cloud.xyz[start:stop], query_ids=ids,
                                     index=index, **opts)
             if rename is None:
-                rename = _scale_names(list(arrays), rs_units, rs, neighbourhood)
+                rename = scale_names(list(arrays), rs_units, rs, neighbourhood)
             if rename:
                 arrays = {rename.get(k_, k_): v for k_, v in arrays.items()}
             out.update(arrays)
@@ -534,7 +534,7 @@ def stream_features(
     return names, fill
 
 
-def _point_feature(name: str, cloud: PointCloud) -> np.ndarray:
+def point_feature(name: str, cloud: PointCloud) -> np.ndarray:
     """A per-point feature of every point of ``cloud``."""
     if name == "return_ratio":
         if "return_number" not in cloud or "number_of_returns" not in cloud:

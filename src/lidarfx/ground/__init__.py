@@ -23,7 +23,7 @@ from ..crs import check_units, cloud_crs, unit_to_metre
 from .dtm import dtm, height_above_ground
 from .params import DEFAULTS
 from .evaluate import ground_errors
-from .raster import Raster
+from ..surface.raster import Raster
 
 __all__ = [
     "DEFAULTS",
@@ -75,7 +75,7 @@ def candidate_mask(
     return cand
 
 
-def _check_params(p: dict[str, float]) -> None:
+def check_params(p: dict[str, float]) -> None:
     for name in ("cell", "window"):
         if not (np.isfinite(p[name]) and p[name] > 0):
             raise LidarfxError(f"{name} must be a positive number, got {p[name]!r}")
@@ -155,13 +155,13 @@ def classify_ground(
     numpy.ndarray
         Boolean mask, ``True`` = ground.
     """
-    from .grid import GridSpec
+    from ..surface.grid import GridSpec
     from .smrf import smrf, window_radius
 
     params = {"cell": float(cell), "slope": float(slope), "window": float(window),
               "threshold": float(threshold), "scalar": float(scalar),
               "edge_step": float(edge_step), "edge_share": float(edge_share)}
-    _check_params(params)
+    check_params(params)
     if check_units(units) == "auto" and isinstance(cloud, PointCloud):
         u = unit_to_metre(cloud)
         if abs(u - 1.0) > 1e-9:

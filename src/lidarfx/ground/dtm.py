@@ -7,12 +7,12 @@ from typing import Any
 import numpy as np
 
 from ..cloud import PointCloud
-from ..crs import cloud_crs, unit_to_metre  # noqa: F401 - importable from here as before
+from ..crs import cloud_crs
 from ..errors import LidarfxError
-from .raster import Raster
-from .tin import TIN_TILE_POINTS, tin_interpolate
+from ..surface.raster import Raster
+from ..surface.tin import TIN_TILE_POINTS, tin_interpolate
 
-__all__ = ["dtm", "height_above_ground", "ground_mask_of", "cloud_crs", "unit_to_metre"]
+__all__ = ["dtm", "height_above_ground", "ground_mask_of"]
 
 GROUND_CLASS = 2
 

@@ -34,7 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from .params import DEFAULTS
-from .grid import GridSpec, bilinear, cell_index, gradient_slope, inpaint, min_surface, open_disk
+from ..surface.grid import GridSpec, bilinear, cell_index, gradient_slope, inpaint, min_surface, open_disk
 
 __all__ = ["progressive_objects", "provisional_dtm", "smrf", "SmrfSurface", "window_radius"]
 

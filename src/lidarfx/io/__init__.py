@@ -125,7 +125,7 @@ def accepts_columns(path: str | os.PathLike) -> bool:
     return bool(_input_module(p).ACCEPTS_COLUMNS) and p.suffix.lower() != ".npz"  # .npz arrays are named
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split()) or exc.__class__.__name__
     return text if len(text) <= 200 else text[:197] + "..."
 
@@ -187,7 +187,7 @@ def read(
             raise
         raise LidarfxError(f"{p}: {exc}") from exc
     except module.READ_ERRORS as exc:
-        raise LidarfxError(f"cannot read {p}: {_one_line(exc)}") from exc
+        raise LidarfxError(f"cannot read {p}: {one_line(exc)}") from exc
     cloud.meta["source"] = str(p.resolve())
     cloud.meta["format"] = module.__name__.rsplit(".", 1)[-1]
     return cloud
@@ -248,7 +248,7 @@ def write(
                 raise
             raise LidarfxError(f"{p}: {exc}") from exc
         except OSError as exc:  # disk full, permissions, ...
-            raise LidarfxError(f"cannot write {p}: {exc.strerror or _one_line(exc)}") from exc
+            raise LidarfxError(f"cannot write {p}: {exc.strerror or one_line(exc)}") from exc
     return p
 
 
@@ -396,7 +396,7 @@ def info(source: str | os.PathLike | PointCloud) -> dict[str, Any]:
                 header = las.read_header(p)
                 chunks = las.iter_chunks(p)
             except las.READ_ERRORS as exc:
-                raise LidarfxError(f"cannot read {p}: {_one_line(exc)}") from exc
+                raise LidarfxError(f"cannot read {p}: {one_line(exc)}") from exc
         else:
             cloud = read(p)
             header, chunks = None, [cloud]
@@ -407,7 +407,7 @@ def info(source: str | os.PathLike | PointCloud) -> dict[str, Any]:
         for chunk in chunks:
             summary.add(chunk.xyz, chunk.attrs)
     except las.READ_ERRORS as exc:
-        raise LidarfxError(f"cannot read {out['file']}: {_one_line(exc)}") from exc
+        raise LidarfxError(f"cannot read {out['file']}: {one_line(exc)}") from exc
     out.update(summary.result())
     if (crs or {}).get("geographic"):
         out["density"] = None  # degrees: no metric area without a projection

@@ -211,7 +211,7 @@ def record_cloud(rec: laspy.PackedPointRecord, header: LasHeader) -> PointCloud:
     return PointCloud(xyz, attrs, header=header)
 
 
-def _check_size(path: Path, header: LasHeader) -> None:
+def check_size(path: Path, header: LasHeader) -> None:
     """An uncompressed file shorter than its header's point count says: a one-line error."""
     n = int(header.point_count)
     if not header.are_points_compressed:
@@ -230,13 +230,13 @@ def iter_records(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[tuple
     Nothing is allocated from the header's point count; a file holding more or fewer points than
     its header announces, or a damaged one, is a one-line :class:`LidarfxError` (after the last
     chunk, for fewer points)."""
-    from . import _one_line
+    from . import one_line
 
     try:
         with laspy.open(path) as reader:
             header = reader.header
             n = int(header.point_count)
-            _check_size(path, header)
+            check_size(path, header)
             done = 0
             for rec in reader.chunk_iterator(chunk_points):
                 m = len(rec)
@@ -245,7 +245,7 @@ def iter_records(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[tuple
                 yield done, rec, header
                 done += m
     except READ_ERRORS as exc:
-        raise LidarfxError(f"cannot read {path}: {_one_line(exc)}") from exc
+        raise LidarfxError(f"cannot read {path}: {one_line(exc)}") from exc
     if done != n:
         raise LidarfxError(f"{path}: header announces {n} points but the file holds {done} (truncated?)")
 
@@ -255,7 +255,7 @@ def read(path: Path, *, columns: list[str] | None = None, progress: bool | None 
     with laspy.open(path) as reader:
         header = reader.header
         n = int(header.point_count)
-        _check_size(path, header)
+        check_size(path, header)
         fields = _fields(header.point_format)
         xyz, attrs = _empty(n, fields)
         done = 0

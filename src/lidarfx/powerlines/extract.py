@@ -627,7 +627,7 @@ def _ground_surface(xyz: np.ndarray, gmask: np.ndarray, cell: float):
     """The ground height at any plan position: the mean height of the ground points per
     ``cell`` (1 m), empty cells filled by linear interpolation, sampled bilinearly (a DTM
     in milliseconds; wires hang metres above it)."""
-    from ..ground.grid import GridSpec, bilinear, cell_index, inpaint
+    from ..surface.grid import GridSpec, bilinear, cell_index, inpaint
 
     lo = xyz[gmask, :2].min(axis=0)
     g = xyz[gmask]

@@ -48,7 +48,9 @@ def _pt(p: Any, nd: int = 3) -> list[float] | None:
 
 
 def conductor_record(cd: Conductor) -> dict[str, Any]:
-    """The JSON record of one conductor (world coordinates, metres)."""
+    """The JSON record of one conductor: coordinates and lengths (the catenary's a, s0 and c, sag,
+    clearances) in the cloud's coordinate unit — metres, or feet for a cloud in feet, as
+    ``meta["units"]`` of ``wires.json`` says — so that the curve can be drawn in the file's CRS."""
     m = cd.measures
     az = (math.degrees(math.atan2(cd.direction[0], cd.direction[1])) + 360.0) % 360.0
     return {
@@ -81,14 +83,20 @@ def _flat(rec: dict[str, Any]) -> dict[str, Any]:
 
 def conductor_polylines(res: PowerLines, step: float = 0.5) -> list[Polyline]:
     """The catenaries as :class:`~lidarfx.vector.Polyline` (kind ``wire``), one vertex every ``step``
-    (m, converted to the cloud's unit as the extraction's lengths: ``res.meta["unit_to_metre"]``)."""
+    (m, converted to the cloud's unit as the extraction's lengths: ``res.meta["unit_to_metre"]``).
+    The attributes sag, conductor_length and the clearances are metres (as the lines' lengths in
+    the vector files); the catenary's a, s0 and c stay in the coordinate unit."""
     step = _step_in_units(res, step)
+    u = res.meta.get("unit_to_metre") or 1.0
     out = []
     for cd in res.conductors:
         rec = conductor_record(cd)
         attrs = {k: rec[k] for k in ("id", "span_id", "bundle_id", "bundle_index", "bundle_size", "a", "s0", "c",
                                      "sag", "conductor_length", "ground_clearance", "object_clearance")}
         attrs["conductor_id"] = attrs.pop("id")
+        for k in ("sag", "conductor_length", "ground_clearance", "object_clearance"):  # metres, like length
+            if attrs[k] is not None and u != 1.0:
+                attrs[k] = round(attrs[k] * u, 4)
         out.append(Polyline(cd.curve(step), support=int(len(cd.index)), rms=float(cd.measures.get("rmse", math.nan)),
                             kind="wire", attrs=attrs))
     return out
@@ -116,6 +124,10 @@ def write_tables(res: PowerLines, folder: str | Path, *, crs: Any = None, step: 
     recs = [conductor_record(cd) for cd in res.conductors]
     info = {**res.meta, **(meta or {})}
     info.pop("seconds", None)
+    from ..crs import unit_name
+
+    unit = res.meta.get("unit_to_metre") or 1.0
+    info["units"] = {"lengths": unit_name(unit), "coordinates": unit_name(unit), "unit_to_metre": unit}
     written = export_lines(conductor_polylines(res, step), geojson=folder / "wires.geojson", dxf=folder / "wires.dxf",
                            crs=crs, meta={k: v for k, v in info.items() if isinstance(v, (int, float, str))})
     _write_csv(folder / "wires.csv", [_flat(r) for r in recs])

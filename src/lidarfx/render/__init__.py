@@ -11,7 +11,7 @@ from .._atomic import atomic_path
 from ..cloud import PointCloud
 
 
-def _save(fig, path: str | Path, dpi: int) -> Path:
+def save_figure(fig, path: str | Path, dpi: int) -> Path:
     """Lay out, write the PNG atomically (temporary file, then rename) and close the figure."""
     import matplotlib.pyplot as plt
 
@@ -24,7 +24,7 @@ def _save(fig, path: str | Path, dpi: int) -> Path:
     return Path(path)
 
 
-def _label_axes(ax, xlabel: str = "x (East) [m]", ylabel: str = "y (North) [m]") -> None:
+def label_axes(ax, xlabel: str = "x (East) [m]", ylabel: str = "y (North) [m]") -> None:
     """Axis labels and tick size of a map panel (plan view by default)."""
     ax.set_xlabel(xlabel, fontsize=8)
     ax.set_ylabel(ylabel, fontsize=8)
@@ -98,7 +98,7 @@ def feature_views(
         ax.tick_params(labelsize=6)
     if title:
         fig.suptitle(title, fontsize=9)
-    return _save(fig, path, 130)
+    return save_figure(fig, path, 130)
 
 
 def _raster_cells(u: np.ndarray, v: np.ndarray, pixels: int, cell: float | None) -> tuple[float, int, int, np.ndarray]:
@@ -192,10 +192,10 @@ def class_map(
         handles.append(plt.Line2D([], [], marker="s", ls="", color=NOT_CLASSIFIED, label=f"not classified: {rest:,}"))
     ax.legend(handles=handles, fontsize=7, loc="upper right", title="class of the highest point (points)",
               title_fontsize=7)
-    _label_axes(ax)
+    label_axes(ax)
     if title:
         ax.set_title(title, fontsize=9)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)
 
 
 def error_images(
@@ -298,7 +298,7 @@ def error_map(
                           (axes[0, 1], im["right"], "errors: reference → predicted (dominant per cell)")):
         ax.imshow(img, origin="lower", interpolation="nearest", extent=extent)
         ax.set_title(head, fontsize=9)
-        _label_axes(ax)
+        label_axes(ax)
     axes[0, 0].legend(handles=[plt.Line2D([], [], marker="s", ls="", color=c, label=str(n))
                                for c, n in zip(im["class_colours"], class_names)], fontsize=7, loc="upper right")
     handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=f"{lab}: {n:,}")
@@ -309,7 +309,7 @@ def error_map(
                       loc="upper right", title=f"{im['wrong']:,} of {im['scored']:,} points wrong", title_fontsize=7)
     if title:
         fig.suptitle(title, fontsize=10)
-    return _save(fig, path, dpi), im["pairs"]
+    return save_figure(fig, path, dpi), im["pairs"]
 
 
 def segment_view(
@@ -383,13 +383,13 @@ def segment_view(
     ax = axes[0, npan - 1]
     ax.imshow(img, origin="lower", interpolation="nearest", extent=extent)
     for ax in axes[0]:
-        _label_axes(ax, xl, yl)
+        label_axes(ax, xl, yl)
     if title:
         axes[0, npan - 1].set_title(title, fontsize=9)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)
 
 
-def _offset_text(v: float) -> str:
+def offset_text(v: float) -> str:
     """``− 630,240`` / ``+ 21`` / empty: what was subtracted from a plotted coordinate."""
     if v == 0:
         return ""
@@ -412,10 +412,10 @@ def _finish_line_map(fig, ax, handles, reference: bool, reference_label: str, sp
     ax.set_xlim(0, span_x)
     ax.set_ylim(0, span_y)
     ax.set_aspect("equal")
-    _label_axes(ax, f"x (East) {_offset_text(x0)} [m]", f"y (North) {_offset_text(y0)} [m]")
+    label_axes(ax, f"x (East) {offset_text(x0)} [m]", f"y (North) {offset_text(y0)} [m]")
     if title:
         ax.set_title(title, fontsize=9)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)
 
 
 def lines_view(
@@ -517,7 +517,7 @@ def powerline_view(result, path: str | Path, *, title: str | None = None, max_pr
         ax.annotate(f"P{p['id']}", (p["position"][0] - x0, p["position"][1] - y0), fontsize=7, xytext=(4, 4),
                     textcoords="offset points")
     ax.set_aspect("equal")
-    _label_axes(ax, f"x (East) {_offset_text(x0)} [m]", f"y (North) {_offset_text(y0)} [m]")
+    label_axes(ax, f"x (East) {offset_text(x0)} [m]", f"y (North) {offset_text(y0)} [m]")
     ax.set_title(title or f"{len(result.conductors)} conductors, {len(result.spans)} spans, {len(result.pylons)} pylons",
                  fontsize=9)
     for k, sp in enumerate(spans):
@@ -547,7 +547,7 @@ def powerline_view(result, path: str | Path, *, title: str | None = None, max_pr
         a2.set_ylabel("z [m]", fontsize=7)
         a2.tick_params(labelsize=6)
     fig.tight_layout()
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)
 
 
 def hillshade(z: np.ndarray, cell: float, *, azimuth: float = 315.0, altitude: float = 45.0) -> np.ndarray:
@@ -568,7 +568,7 @@ def hillshade(z: np.ndarray, cell: float, *, azimuth: float = 315.0, altitude: f
 
 def breakline_view(dtm, lines: Sequence, path: str | Path, *, reference: Sequence[np.ndarray] | None = None,
                    title: str | None = None, dpi: int = 110) -> Path:
-    """Hillshade of a DTM (:class:`lidarfx.ground.raster.Raster`) with 3-D polylines drawn in plan
+    """Hillshade of a DTM (:class:`lidarfx.surface.raster.Raster`) with 3-D polylines drawn in plan
     view (convex breaks red, concave blue; ``attrs["form"]``) and optional reference lines
     (wide translucent green).  Axes in metres from the raster's south-west corner."""
     import matplotlib

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_path
-from . import _save
+from . import save_figure
 
 __all__ = ["plot_confusion", "plot_importance", "plot_elimination"]
 
@@ -63,7 +63,7 @@ def plot_confusion(m: dict[str, Any], path: str | os.PathLike, title: str | None
     ax.set_title(f"{head}OA {_num(m['oa'])}  kappa {_num(m['kappa'])}  mean F1 {_num(m['mean_f1'])}{tail}", fontsize=9)
     fig.text(0.5, 0.01, f"layout: {layout}; cell = points and share of the reference row",
              ha="center", fontsize=7)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))  # room for the layout line (not _save: its layout drops the rect)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))  # room for the layout line (not save_figure: its layout drops the rect)
     p = Path(path)
     try:
         with atomic_path(p) as tmp:
@@ -93,7 +93,7 @@ def plot_importance(imp: dict[str, Any], path: str | os.PathLike, top: int = 20)
         ax.set_title(title, fontsize=8, wrap=True)
         ax.tick_params(axis="x", labelsize=7)
     fig.suptitle(f"feature importance (top {n})", fontsize=9)
-    return _save(fig, path, dpi=110)
+    return save_figure(fig, path, dpi=110)
 
 
 def plot_elimination(be: dict[str, Any], path: str | os.PathLike) -> Path:
@@ -119,4 +119,4 @@ def plot_elimination(be: dict[str, Any], path: str | os.PathLike) -> Path:
     ax.set_title("backward elimination (random forest, impurity importance)", fontsize=9)
     ax.legend(fontsize=7, loc="lower left")
     ax.grid(alpha=0.3)
-    return _save(fig, path, dpi=110)
+    return save_figure(fig, path, dpi=110)

@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from . import _label_axes, _offset_text, _save
+from . import label_axes, offset_text, save_figure
 
 MEMBER_COLOURS = {"leg": "#d62728", "brace": "#1f77b4", "arm": "#2ca02c", "other": "#ff7f0e"}
 """Colours of the member labels (a label not listed: grey-brown)."""
@@ -15,7 +15,7 @@ MEMBER_COLOURS = {"leg": "#d62728", "brace": "#1f77b4", "arm": "#2ca02c", "other
 
 def _axis(name: str, offset: float) -> str:
     """``x (East) − 512,000 [m]``: an axis label with what was subtracted (nothing when 0)."""
-    return " ".join(filter(None, (name, _offset_text(offset), "[m]")))
+    return " ".join(filter(None, (name, offset_text(offset), "[m]")))
 
 
 def _oblique(xyz: np.ndarray, azimuth: float, elevation: float) -> np.ndarray:
@@ -71,7 +71,7 @@ def members_view(xyz: np.ndarray, lines: Sequence, path: str | Path, *, title: s
                 ax.plot(uv[:, 0], uv[:, 1], "-", lw=1.6 if lab == "leg" else 1.1,
                         color=MEMBER_COLOURS.get(lab, "#8c564b"), solid_capstyle="round")
         ax.set_aspect("equal", adjustable="datalim")
-        _label_axes(ax, xlabel, _axis("z", o[2]) if ax is not axes[2] else "screen y [m]")
+        label_axes(ax, xlabel, _axis("z", o[2]) if ax is not axes[2] else "screen y [m]")
         ax.set_title(name, fontsize=9)
     handles = [plt.Line2D([], [], color=MEMBER_COLOURS.get(k, "#8c564b"), lw=2.5,
                           label=f"{k}: {len(kinds[k])} members, {sum(kinds[k]):,.1f} m") for k in order]
@@ -80,4 +80,4 @@ def members_view(xyz: np.ndarray, lines: Sequence, path: str | Path, *, title: s
     key.legend(handles=handles, fontsize=8, loc="center left", frameon=False, title="members", title_fontsize=9)
     if title:
         fig.suptitle(title, fontsize=10)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)

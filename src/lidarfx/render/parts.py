@@ -6,7 +6,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from . import _label_axes, _offset_text, _save
+from . import label_axes, offset_text, save_figure
 
 KIND_STYLE: dict[str, dict[str, Any]] = {
     "bolt": {"colour": "#d62728", "marker": "o", "size": 14, "label": "bolt / rivet"},
@@ -87,8 +87,8 @@ def parts_view(xyz: np.ndarray, part_kind: np.ndarray, parts: Sequence[dict[str,
                            edgecolors=st["colour"], linewidths=1.0)
         ax.set_aspect("equal")
         axis_name = "x (East)" if a == 0 else "y (North)"
-        _label_axes(ax, " ".join(filter(None, (axis_name, _offset_text(o[a]), "[m]"))),
-                    " ".join(filter(None, ("z", _offset_text(o[2]), "[m]"))))
+        label_axes(ax, " ".join(filter(None, (axis_name, offset_text(o[a]), "[m]"))),
+                    " ".join(filter(None, ("z", offset_text(o[2]), "[m]"))))
 
     for ax, (a, name) in zip(axes[0], ((0, "front (looking north)"), (1, "side (looking west)"))):
         draw(ax, a, None, 0.15, 0.6, 1.0)
@@ -112,4 +112,4 @@ def parts_view(xyz: np.ndarray, part_kind: np.ndarray, parts: Sequence[dict[str,
     axes[0, 0].legend(handles=handles, fontsize=8, loc="upper left", framealpha=0.9)
     if title:
         fig.suptitle(title, fontsize=10)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)

@@ -48,8 +48,8 @@ def section_view(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..colour import _zbuffer, colour_cloud, key_panel, picture_key
-    from . import _save
+    from ..colour import zbuffer, colour_cloud, key_panel, picture_key
+    from . import save_figure
 
     missing = [a for a in ("section_s", "section_h", "section_d") if a not in cloud]
     if missing:
@@ -63,7 +63,7 @@ def section_view(
     s = np.asarray(cloud["section_s"], dtype=np.float64)
     h = np.asarray(cloud["section_h"], dtype=np.float64)
     d = np.asarray(cloud["section_d"], dtype=np.float64)
-    img, cell, nu, nv, u0, v0 = _zbuffer(s, h, d, rgb, pixels)
+    img, cell, nu, nv, u0, v0 = zbuffer(s, h, d, rgb, pixels)
 
     frame = cloud.meta.get("section") or {}
     span_s = max(nu * cell, float(frame.get("length") or 0.0))
@@ -109,4 +109,4 @@ def section_view(
         if meta.get("range_source", "").startswith("percentiles"):
             label += "  (2–98 % range)"
     picture_key(fig, ax, kx, meta, label=label)
-    return _save(fig, path, dpi)
+    return save_figure(fig, path, dpi)

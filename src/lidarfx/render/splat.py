@@ -510,15 +510,15 @@ def _colour_points(cloud: PointCloud, by: str, cmap: str, value_range, progress)
         rgb = np.column_stack([out["red"], out["green"], out["blue"]])
         return rgb, out.meta["colour"]
     if by in CLASS_NAMES:
-        rgb, meta = col._by_class(cloud)
+        rgb, meta = col.by_class(cloud)
         return rgb, {"by": "class", **meta}
     if by == "set":
-        rgb, meta = col._by_set(cloud)
+        rgb, meta = col.by_set(cloud)
         return rgb, {"by": "set", **meta}
     if by not in cloud and by not in ("x", "y", "z"):
         have = ", ".join(["x", "y", "z", *cloud.names])
         raise LidarfxError(f"no attribute {by!r} to render by; use rgb, class, morphology or one of: {have}")
-    rgb, meta = col._by_attribute(cloud, by, cmap, value_range)
+    rgb, meta = col.by_attribute(cloud, by, cmap, value_range)
     return rgb, {"by": by, **meta}
 
 
@@ -566,16 +566,16 @@ def _key_width(meta: dict | None) -> float:
     return 1.25
 
 
-def _draw_scale_and_north(ax, frame: Frame, w: int, h: int, north: bool) -> float:
+def _draw_scale_and_north(ax, frame: Frame, w: int, h: int, north: bool, unit: float = 1.0) -> float:
     """A scale bar (a round length about 1/5 of the width) at the bottom left and, with ``north``,
     a north arrow at the top right of the picture axes ``ax`` (pixel coordinates, y down);
-    returns the bar's length in metres."""
+    returns the bar's length in metres (``unit``: metres per coordinate unit, for files in feet)."""
     from matplotlib import patheffects
     from matplotlib.patches import Rectangle
 
     halo = [patheffects.withStroke(linewidth=3, foreground="white")]
-    length = scale_bar_length(w * frame.cell)
-    px = length / frame.cell
+    length = scale_bar_length(w * frame.cell * unit)
+    px = length / (frame.cell * unit)
     pad = 0.03 * min(w, h)
     x0, y0 = pad, h - pad
     thick = max(3.0, 0.012 * min(w, h))
@@ -643,7 +643,7 @@ def render_picture(
 
     from .._atomic import check_output_folder
     from ..colour import check_cmap, check_value_range, key_panel, picture_key
-    from . import _save
+    from . import save_figure
 
     t0 = time.perf_counter()
     if not isinstance(by, str) or not by.strip():
@@ -690,7 +690,9 @@ def render_picture(
         ax.set_xlim(0, w)
         ax.set_ylim(h, 0)
         ax.set_axis_off()
-        bar = _draw_scale_and_north(ax, img.frame, w, h, north=view == "top")
+        from ..crs import unit_to_metre
+
+        bar = _draw_scale_and_north(ax, img.frame, w, h, north=view == "top", unit=unit_to_metre(cloud))
         kx = None
         if key_meta is not None and key_panel(key_meta):
             part = 0.5 if key_meta.get("by") != "morphology" else 1.0  # a colour bar leaves room for its ticks and label
@@ -707,7 +709,7 @@ def render_picture(
         source = cloud.meta.get("source")
         head = title or f"{Path(source).name if source else 'points'}: {by}"
         drawn = int(_bounds(cloud.xyz)[2])
-        sub = (f"{_VIEW_TEXT[view]}  ·  {drawn:,} points  ·  {_length_text(img.frame.cell)} per pixel  ·  "
+        sub = (f"{_VIEW_TEXT[view]}  ·  {drawn:,} points  ·  {_length_text(img.frame.cell * unit_to_metre(cloud))} per pixel  ·  "
                f"{_SHADING_TEXT[shading]}")
         top = 1.0 - band / height
         fig.text(0.5, top + 0.62 * band / height, head, ha="center", va="center", fontsize=11)
@@ -715,9 +717,9 @@ def render_picture(
     except BaseException:  # no figure is left open after an error
         plt.close(fig)
         raise
-    with warnings.catch_warnings():  # _save lays out subplots; these axes are placed by hand
+    with warnings.catch_warnings():  # save_figure lays out subplots; these axes are placed by hand
         warnings.simplefilter("ignore", UserWarning)
-        out = _save(fig, path, dpi)
+        out = save_figure(fig, path, dpi)
     t3 = time.perf_counter()
     summary = {
         "output": str(out),

@@ -26,7 +26,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import LidarfxError, check_int
-from . import _save
+from . import save_figure
 from .palette import set_colour, set_colours
 
 __all__ = ["stereonet_view", "rose_view", "set_view", "orientation_summary_view"]
@@ -168,13 +168,13 @@ def _density_label(method: str, sigma: float) -> str:
 
 
 def _save_quiet(fig, path: str | Path, dpi: int) -> Path:
-    """:func:`lidarfx.render._save` without tight_layout's warning about mplstereonet's hidden
+    """:func:`lidarfx.render.save_figure` without tight_layout's warning about mplstereonet's hidden
     azimuth axes (:func:`_primitive_labels` leaves it empty)."""
     import warnings
 
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="This figure includes Axes that are not compatible with tight_layout")
-        return _save(fig, path, dpi)
+        return save_figure(fig, path, dpi)
 
 
 # ----------------------------------------------------------------------------- stereonet

@@ -187,7 +187,7 @@ def _check_int(name: str, value: Any, lo: int) -> int:
     return check_int(name, value, lo, MAX_COUNT, hi_text="10^12")
 
 
-def _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width=0.0, *,
+def check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width=0.0, *,
                   first_refit=10, refit_fraction=0.10, refit_max=1000):
     """Every option of :func:`segment_planes` (the CLI runs this before it reads the cloud)."""
     for name, v in (("normal_radius", normal_radius), ("max_distance", max_distance), ("growing_radius", growing_radius)):
@@ -285,7 +285,7 @@ def segment_planes(
 
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("segment_planes expects a PointCloud (see lidarfx.read)")
-    _check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width,
+    check_params(normal_radius, max_distance, growing_radius, max_angle, min_size, min_width,
                   first_refit=first_refit, refit_fraction=refit_fraction, refit_max=refit_max)
     n = len(cloud)
     if n == 0:

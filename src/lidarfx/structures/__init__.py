@@ -210,7 +210,7 @@ def _classify_kernel(lo, hi, sig, cnt, cid, log_n, mean, std, n_classes, reject,
         label[i] = best if d <= reject else -1
 
 
-def _check_reject(reject) -> float:
+def check_reject(reject) -> float:
     try:
         v = math.nan if isinstance(reject, (bool, str)) else float(reject)
     except (TypeError, ValueError):
@@ -221,7 +221,7 @@ def _check_reject(reject) -> float:
     return v
 
 
-def _check_min_neighbours(min_neighbours) -> int:
+def check_min_neighbours(min_neighbours) -> int:
     return check_int("min_neighbours", min_neighbours, 3, 1_000_000)
 
 
@@ -230,8 +230,8 @@ def classify_signatures(sig: np.ndarray, cnt: np.ndarray, *, references: Any = "
                         min_neighbours: int = DEFAULT_MIN_NEIGHBOURS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Labels (int32), confidences and distances (float32) of signatures from
     :func:`structure_signatures` (see :func:`classify_structures` for the parameters)."""
-    reject = _check_reject(reject)
-    min_n = _check_min_neighbours(min_neighbours)
+    reject = check_reject(reject)
+    min_n = check_min_neighbours(min_neighbours)
     refs, kind = resolve_references(references)
     cid, log_n, mean, std = refs.tables(kind, weighting)
     sig = np.ascontiguousarray(sig, dtype=np.float64)
@@ -309,8 +309,8 @@ def classify_structures(
 
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("classify_structures expects a PointCloud (see lidarfx.read)")
-    reject = _check_reject(reject)
-    min_n = _check_min_neighbours(min_neighbours)
+    reject = check_reject(reject)
+    min_n = check_min_neighbours(min_neighbours)
     refs, kind = resolve_references(references)
     refs.tables(kind, weighting)  # checks weighting before any work
     if len(cloud) == 0:

@@ -92,8 +92,8 @@ def expand_inputs(inputs: str | os.PathLike | Sequence[str | os.PathLike]) -> li
 def open_catalog(inputs: str | os.PathLike | Sequence[str | os.PathLike]) -> Catalog:
     """Read the headers of every input (not the points).  A header whose point count the file
     cannot hold (uncompressed), or with bounds that are not finite, is a one-line error."""
-    from ..io import _one_line
-    from ..io.las import READ_ERRORS, _check_size, read_header
+    from ..io import one_line
+    from ..io.las import READ_ERRORS, check_size, read_header
 
     cat = Catalog()
     first = 0
@@ -101,8 +101,8 @@ def open_catalog(inputs: str | os.PathLike | Sequence[str | os.PathLike]) -> Cat
         try:
             h = read_header(p)
         except READ_ERRORS as exc:
-            raise LidarfxError(f"cannot read {p}: {_one_line(exc)}") from exc
-        _check_size(p, h)
+            raise LidarfxError(f"cannot read {p}: {one_line(exc)}") from exc
+        check_size(p, h)
         mins, maxs = np.asarray(h.mins, dtype=np.float64), np.asarray(h.maxs, dtype=np.float64)
         n = int(h.point_count)
         if n and not (np.isfinite(mins).all() and np.isfinite(maxs).all() and (maxs >= mins).all()):

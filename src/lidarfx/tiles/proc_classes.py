@@ -76,13 +76,13 @@ def eigenclass_buffer(o: dict, density: float) -> tuple[float, bool]:
 
 def check_eigenclass_options(o: dict) -> None:
     from ..features.api import radii_list
-    from ..structures import _check_min_neighbours, _check_reject
+    from ..structures import check_min_neighbours, check_reject
     from ..structures.references import resolve_references
 
     if not radii_list(None, o.get("radii") or []):
         raise LidarfxError("in chunks, give the radius: -r R (the default comes from the whole cloud's point spacing)")
-    _check_reject(o.get("reject", 3.0))
-    _check_min_neighbours(o.get("min_neighbours", 5))
+    check_reject(o.get("reject", 3.0))
+    check_min_neighbours(o.get("min_neighbours", 5))
     refs, kind = resolve_references(o.get("references", "trained"))
     refs.tables(kind, o.get("weighting", "structure"))
 
@@ -129,7 +129,7 @@ NOT_LOCAL_INPUTS = {
 _MODELS: dict[tuple, Any] = {}
 
 
-def _model(o: dict):
+def tile_model(o: dict):
     """The model of the run with the options' overrides (loaded once per process)."""
     from ..classify import load_model
 
@@ -152,12 +152,12 @@ def _model(o: dict):
 
 
 def _plan(model) -> tuple:
-    return model.features._plan()
+    return model.features.feature_plan()
 
 
 def _limit(model, rs) -> tuple[float | None, int]:
     """The thinning density limit of the model (points per m², None: no thinning) and min_keep,
-    as :meth:`LidarFeatures._matrix` takes them."""
+    as :meth:`LidarFeatures.feature_matrix` takes them."""
     tr = model.features
     limit = None
     if tr.max_disc_points is not None and rs:
@@ -204,7 +204,7 @@ def classify_options(model_path, inputs, *, ground=None, precomputed=False, conf
          "confidence": bool(confidence), "probabilities": bool(probabilities),
          "min_building_area": None if min_building_area is None else float(min_building_area),
          "max_multi_return_share": None if max_multi_return_share is None else float(max_multi_return_share)}
-    model = _model(o)
+    model = tile_model(o)
     check_classify_model(model, o)
     names, slots, point, rs = _plan(model)
     files = expand_inputs(inputs)
@@ -296,7 +296,7 @@ def tr_msac(model) -> bool:
 
 def classify_buffer(o: dict, density: float) -> tuple[float, bool]:
     """The model's largest radius (metres) in coordinate units (exact); 0 with precomputed features."""
-    model = _model(o)
+    model = tile_model(o)
     names, slots, point, rs = _plan(model)
     if not slots or model.features.precomputed or not rs:
         return 0.0, True
@@ -306,7 +306,7 @@ def classify_buffer(o: dict, density: float) -> tuple[float, bool]:
 def check_classify_options(o: dict) -> None:
     if "origin" not in o:
         raise LidarfxError("classify options come from lidarfx.tiles.proc_classes.classify_options")
-    check_classify_model(_model(o), o)
+    check_classify_model(tile_model(o), o)
 
 
 def uniform_at(ids: np.ndarray, seed: int = 0, block: int = 1 << 16) -> np.ndarray:
@@ -340,7 +340,7 @@ def classify_process(chunk, ctx, o: dict):
     from ..features.registry import Request
     from ..io.las import format_for_classes
 
-    model = _model(o)
+    model = tile_model(o)
     tr = model.features
     names, slots, point, rs = _plan(model)
     cloud, own = chunk.cloud, chunk.own
@@ -371,11 +371,11 @@ def classify_process(chunk, ctx, o: dict):
             index = feature_index(nb_xyz, tr.neighbourhood, tr.k, rs, Request(tuple(slots), ()),
                                   origin=np.asarray(o["origin"], dtype=np.float64))
             cache["index"] = (id(sub), nb_xyz, index)
-        X = tr._matrix(CloudSample(sub, rows, ids[rows]), names, slots, point, rs, cache)
+        X = tr.feature_matrix(CloudSample(sub, rows, ids[rows]), names, slots, point, rs, cache)
         if not (o.get("confidence") or o.get("probabilities")):
-            k[:] = model._predict_matrix(X)
+            k[:] = model.predict_matrix(X)
         else:
-            proba = model._proba_matrix(X)
+            proba = model.proba_matrix(X)
             k[:] = proba.argmax(axis=1)
             if o.get("probabilities"):
                 every = proba.astype(np.float32)

@@ -160,13 +160,13 @@ def _first_clouds(cat) -> list:
 
 
 def _attribute_values(cat, name: str) -> Callable[[], Iterator[np.ndarray]]:
-    from ..colour import _attribute
+    from ..colour import attribute_array
     from ..io.las import iter_chunks
 
     def values():
         for s in cat.sources:
             for c in iter_chunks(Path(s.path)):
-                yield _attribute(c, name).astype(np.float64)
+                yield attribute_array(c, name).astype(np.float64)
 
     return values
 
@@ -179,7 +179,7 @@ def colour_options(inputs, by: str = "morphology", *, radius: float | None = Non
     range of an attribute (exact 2nd-98th percentile, a pass over the inputs), whether the
     inputs carry normals.  One-line errors as the in-memory run's, and for morphology without
     normals and without ``radius``."""
-    from ..colour import KEYWORDS, NORMAL_NAMES, _attribute, check_cmap, check_radius, check_sun, check_value_range
+    from ..colour import KEYWORDS, NORMAL_NAMES, attribute_array, check_cmap, check_radius, check_sun, check_value_range
     from .catalog import open_catalog
 
     if not isinstance(by, str) or not by.strip():
@@ -219,7 +219,7 @@ def colour_options(inputs, by: str = "morphology", *, radius: float | None = Non
     else:
         cm = check_cmap(cmap)
         for c in firsts:
-            v = _attribute(c, by)
+            v = attribute_array(c, by)
             if v.dtype.kind not in "biuf":
                 raise LidarfxError(f"attribute {by!r} is not numeric ({v.dtype}); it cannot be colour-mapped")
         o.update(cmap=cm.name)
@@ -274,7 +274,7 @@ def check_colour_options(o: dict) -> None:
 def colour_process(chunk, ctx, o: dict):
     """RGB of the owned points: :func:`lidarfx.colour.colour_cloud` on them, the normals (when
     computed) in the whole cloud's index layout over the buffered cloud."""
-    from ..colour import KEYWORDS, NORMAL_NAMES, _by_attribute, colour_cloud, morphology_rgb, to_uint16
+    from ..colour import KEYWORDS, NORMAL_NAMES, by_attribute, colour_cloud, morphology_rgb, to_uint16
 
     cloud, own = chunk.cloud, chunk.own
     result = cloud.subset(own)
@@ -299,7 +299,7 @@ def colour_process(chunk, ctx, o: dict):
         out.meta.pop("colour", None)
         return out
     # the whole input's range as the in-memory run has it (lo == hi included: mid colour)
-    rgb, _ = _by_attribute(result, by, o.get("cmap", "viridis"), tuple(float(v) for v in o["range"]))
+    rgb, _ = by_attribute(result, by, o.get("cmap", "viridis"), tuple(float(v) for v in o["range"]))
     c16 = to_uint16(rgb)
     result["red"], result["green"], result["blue"] = c16[:, 0], c16[:, 1], c16[:, 2]
     return result

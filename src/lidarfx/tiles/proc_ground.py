@@ -62,7 +62,7 @@ def ground_buffer(o: dict, density: float) -> tuple[float, bool]:
 
 def check_ground_options(o: dict) -> None:
     """The in-memory run's checks of the SMRF parameters and the ignored classes."""
-    from ..ground import DEFAULTS, _check_params, check_ignore_classes
+    from ..ground import DEFAULTS, check_params, check_ignore_classes
 
     unknown = set(o) - set(_PARAMS) - {"last_returns", "ignore_classes", "hag", "unit_to_metre"}
     if unknown:
@@ -73,7 +73,7 @@ def check_ground_options(o: dict) -> None:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise LidarfxError(f"{k} must be a number, got {v!r}")
         p[k] = float(v)
-    _check_params(p)
+    check_params(p)
     check_ignore_classes(o.get("ignore_classes", []))
     u = o.get("unit_to_metre", 1.0)
     if isinstance(u, bool) or not isinstance(u, (int, float)) or not (math.isfinite(u) and u > 0):
@@ -84,7 +84,7 @@ def ground_process(chunk, ctx, o: dict):
     """The owned points with ``classification`` 2 / 1 (ignored classes kept) and, with ``hag``,
     ``height_above_ground``."""
     from ..ground import DEFAULTS, apply_ground_classification, classify_ground
-    from ..ground.tin import TIN_TILE_POINTS, tin_interpolate
+    from ..surface.tin import TIN_TILE_POINTS, tin_interpolate
 
     cloud, own = chunk.cloud, chunk.own
     params = {k: float(o.get(k, DEFAULTS[k])) for k in _PARAMS}

@@ -94,16 +94,16 @@ def chunk_feature_arrays(chunk, ctx, req, radii, *, neighbourhood: str = "sphere
 
 def features_process(chunk, ctx, o: dict):
     """The features of the owned points (:func:`chunk_feature_arrays`) and the per-point ones."""
-    from ..features.api import _point_feature, radii_list
+    from ..features.api import point_feature, radii_list
     from ..features.registry import resolve
 
-    from ..features.api import _scale_names
+    from ..features.api import scale_names
 
     cloud, own = chunk.cloud, chunk.own
     req = resolve(o.get("features"))
     result = cloud.subset(own)
     result.meta.pop("source", None)
-    result.update({name: _point_feature(name, cloud)[own] for name in req.point})
+    result.update({name: point_feature(name, cloud)[own] for name in req.point})
     if req.slots:
         u = unit_of(o)  # the options are metres (as compute_features takes them)
         rs = radii_list(None, o.get("radii") or [])
@@ -114,7 +114,7 @@ def features_process(chunk, ctx, o: dict):
             k=o.get("k"), scanner=o.get("scanner"), height=None if height is None else float(height) / u,
             convention=o.get("convention", "default"), d_max=float(o.get("d_max", 0.10)) / u,
             hist_bins=o.get("hist_bins", 10), seed=o.get("seed", 0), unit=u)
-        rename = _scale_names(list(arrays), rs_units, rs, o.get("neighbourhood", "sphere"))
+        rename = scale_names(list(arrays), rs_units, rs, o.get("neighbourhood", "sphere"))
         result.update({rename.get(n, n): v for n, v in arrays.items()})
     return result
 

@@ -269,11 +269,11 @@ def check_options(**params: Any) -> None:
     if unknown:
         raise LidarfxError(f"unknown parameters {sorted(unknown)}; known: {', '.join(DEFAULTS)}")
     p = {**DEFAULTS, **params}
-    _check_params(p["radius"], p["threshold"], p["noise"], p["min_points"], p["min_size"], p["max_size"], p["link"],
+    check_params(p["radius"], p["threshold"], p["noise"], p["min_points"], p["min_size"], p["max_size"], p["link"],
                   p["compact_link"], p["max_compact_size"])
 
 
-def _check_params(radius, threshold, noise, min_points, min_size, max_size, link, compact_link, max_compact_size):
+def check_params(radius, threshold, noise, min_points, min_size, max_size, link, compact_link, max_compact_size):
     from ..features.api import MIN_RADIUS
 
     radius = check_number("radius", radius, MIN_RADIUS, 1e6)
@@ -355,7 +355,7 @@ def detect_small_parts(
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("detect_small_parts expects a PointCloud (see lidarfx.read)")
     (radius, threshold, noise, min_points, min_size, max_size, link, compact_link,
-     max_compact_size) = _check_params(radius, threshold, noise, min_points, min_size, max_size, link, compact_link,
+     max_compact_size) = check_params(radius, threshold, noise, min_points, min_size, max_size, link, compact_link,
                                        max_compact_size)
     given = {"radius": radius, "noise": noise, "min_size": min_size, "max_size": max_size, "link": link,
              "compact_link": compact_link, "max_compact_size": max_compact_size}

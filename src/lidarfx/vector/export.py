@@ -53,7 +53,7 @@ _DXF_BAD_CHARS = set('<>/\\":;?*|=`')  # AutoCAD's reserved characters (ezdxf's 
 
 # ------------------------------------------------------------------ CRS
 def crs_name(crs: Any) -> str | None:
-    """The name for the GeoJSON ``crs`` member from a :func:`lidarfx.ground.dtm.cloud_crs` dict.
+    """The name for the GeoJSON ``crs`` member from a :func:`lidarfx.crs.cloud_crs` dict.
 
     EPSG code known → ``"urn:ogc:def:crs:EPSG::<code>"``; only a WKT → its EPSG code
     by pyproj (confidence ≥ 70 %) as URN, else the WKT itself (GDAL
@@ -131,9 +131,36 @@ def _rnd(v: float, precision: int) -> float:
     return round(float(v), precision) + 0.0
 
 
-def _records(lines: list[Polyline]) -> list[dict[str, Any]]:
-    """``{"id": i, **properties}`` per line (the attrs clash check is in properties())."""
-    return [{"id": i, **line.properties()} for i, line in enumerate(lines)]
+def _unit_of(crs: Any) -> float:
+    """Metres per coordinate unit of ``crs`` (a :func:`lidarfx.crs.cloud_crs` dict), 1.0 otherwise."""
+    u = crs.get("unit_to_metre") if isinstance(crs, Mapping) else None
+    try:
+        u = float(u)
+    except (TypeError, ValueError):
+        return 1.0
+    return u if math.isfinite(u) and u > 0 else 1.0
+
+
+def _records(lines: list[Polyline], unit: float = 1.0) -> list[dict[str, Any]]:
+    """``{"id": i, **properties}`` per line (the attrs clash check is in properties()); with
+    ``unit`` (metres per coordinate unit) ≠ 1 the lengths and the rms are converted to metres —
+    lengths in tables are metres (docs/conventions.md), z_min / z_max stay coordinates."""
+    out = [{"id": i, **line.properties()} for i, line in enumerate(lines)]
+    if unit != 1.0:
+        for rec in out:
+            for k in ("length", "length_2d", "rms"):
+                if rec.get(k) is not None:
+                    rec[k] = round(rec[k] * unit, 4)
+    return out
+
+
+def _with_units(meta: Any, unit: float) -> Any:
+    """``meta`` with a ``units`` entry when the coordinates are not metres."""
+    if unit == 1.0:
+        return meta
+    from ..crs import unit_name
+
+    return {**(meta or {}), "units": {"lengths": "m", "coordinates": unit_name(unit), "unit_to_metre": unit}}
 
 
 # ------------------------------------------------------------------ GeoJSON
@@ -154,6 +181,8 @@ def _write_geojson_to(tmp: Path, lines: list[Polyline], *, crs: Any, precision: 
     precision = _check_precision(precision)
     _check_reserved(lines, ("id",), "GeoJSON")
     name = crs_name(crs)
+    unit = _unit_of(crs)
+    meta = _with_units(meta, unit)
     head: dict[str, Any] = {"type": "FeatureCollection"}
     if name is not None:
         head["crs"] = {"type": "name", "properties": {"name": name}}
@@ -162,7 +191,7 @@ def _write_geojson_to(tmp: Path, lines: list[Polyline], *, crs: Any, precision: 
     with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(dumps(head)[:-1])  # without the closing brace
         fh.write(', "features": [')
-        for i, (line, props) in enumerate(zip(lines, _records(lines))):
+        for i, (line, props) in enumerate(zip(lines, _records(lines, unit))):
             feature = {"type": "Feature", "properties": props,
                        "geometry": {"type": "LineString", "coordinates": _round(line.ring, precision)}}
             fh.write(("," if i else "") + "\n" + dumps(feature))
@@ -334,7 +363,7 @@ def _cell(v: Any) -> Any:
     return dumps(v)
 
 
-def write_csv(lines: Iterable[Polyline], path: str | os.PathLike, *, precision: int = 3) -> Path:
+def write_csv(lines: Iterable[Polyline], path: str | os.PathLike, *, precision: int = 3, unit: float = 1.0) -> Path:
     """One row per line: id, kind, n_vertices, length, length_2d, support, rms, z_min, z_max,
     closed, start and end vertex, then every attrs key met (first-seen order, empty cell
     where a line lacks it).  Lengths and rms as :meth:`Polyline.properties` rounds them,
@@ -342,11 +371,11 @@ def write_csv(lines: Iterable[Polyline], path: str | os.PathLike, *, precision: 
     p = Path(path)
     check_output_folder(p)
     with atomic_path(p) as tmp:
-        _write_csv_to(tmp, _as_lines(lines), precision=precision)
+        _write_csv_to(tmp, _as_lines(lines), precision=precision, unit=unit)
     return p
 
 
-def _write_csv_to(tmp: Path, lines: list[Polyline], *, precision: int) -> None:
+def _write_csv_to(tmp: Path, lines: list[Polyline], *, precision: int, unit: float = 1.0) -> None:
     precision = _check_precision(precision)
     _check_reserved(lines, _CSV_COLUMNS, "CSV")
     extra: dict[str, None] = {}
@@ -356,7 +385,7 @@ def _write_csv_to(tmp: Path, lines: list[Polyline], *, precision: int) -> None:
     with open(tmp, "w", encoding="utf-8", newline="") as fh:
         w = _csv.writer(fh)
         w.writerow([*_CSV_COLUMNS, *extra])
-        for line, props in zip(lines, _records(lines)):
+        for line, props in zip(lines, _records(lines, unit)):
             v = line.vertices
             first, last = v[0], v[-1]
             row = [props["id"], props["kind"], props["n_vertices"], props["length"], props["length_2d"],
@@ -388,23 +417,23 @@ def _write_vertices_csv_to(tmp: Path, lines: list[Polyline], *, precision: int) 
 
 # ------------------------------------------------------------------ JSON
 def write_json(lines: Iterable[Polyline], path: str | os.PathLike, *, meta: Mapping[str, Any] | None = None,
-               precision: int = 3) -> Path:
+               precision: int = 3, unit: float = 1.0) -> Path:
     """``{"meta": meta or {}, "lines": [{"id", **properties, "vertices": [[x, y, z], …]}]}``
     (a closed line's first vertex is not repeated: ``"closed"`` says so)."""
     p = Path(path)
     check_output_folder(p)
     with atomic_path(p) as tmp:
-        _write_json_to(tmp, _as_lines(lines), meta=meta, precision=precision)
+        _write_json_to(tmp, _as_lines(lines), meta=meta, precision=precision, unit=unit)
     return p
 
 
-def _write_json_to(tmp: Path, lines: list[Polyline], *, meta: Any, precision: int) -> None:
+def _write_json_to(tmp: Path, lines: list[Polyline], *, meta: Any, precision: int, unit: float = 1.0) -> None:
     precision = _check_precision(precision)
     _check_reserved(lines, ("id", "vertices"), "JSON")
-    m = _check_meta(meta)
+    m = _check_meta(_with_units(meta, unit))
     with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
         fh.write('{"meta": ' + dumps(m) + ', "lines": [')
-        for i, (line, props) in enumerate(zip(lines, _records(lines))):
+        for i, (line, props) in enumerate(zip(lines, _records(lines, unit))):
             rec = {**props, "vertices": _round(line.vertices, precision)}
             fh.write(("," if i else "") + "\n" + dumps(rec))
         fh.write("\n]}\n" if lines else "]}\n")
@@ -420,9 +449,11 @@ def export_lines(lines: Iterable[Polyline], *, geojson: str | os.PathLike | None
     All output folders are checked before anything is written, and the formats are
     written to temporary files first and renamed only when all succeeded: a failure
     leaves none of the outputs behind.  ``crs`` goes to GeoJSON, ``meta`` to GeoJSON
-    and JSON.
+    and JSON; when ``crs`` (a :func:`lidarfx.crs.cloud_crs` dict) has coordinates in feet, the
+    lengths and rms of every format are metres and ``meta`` gains a ``units`` entry.
     """
     items = _as_lines(lines)
+    unit = _unit_of(crs)
     targets = {k: Path(v) for k, v in (("geojson", geojson), ("dxf", dxf), ("csv", csv), ("json", json))
                if v is not None}
     for p in targets.values():
@@ -436,8 +467,8 @@ def export_lines(lines: Iterable[Polyline], *, geojson: str | os.PathLike | None
     writers = {
         "geojson": lambda tmp: _write_geojson_to(tmp, items, crs=crs, precision=3, meta=meta),
         "dxf": lambda tmp: _write_dxf_to(tmp, items, layer=None),
-        "csv": lambda tmp: _write_csv_to(tmp, items, precision=3),
-        "json": lambda tmp: _write_json_to(tmp, items, meta=meta, precision=3),
+        "csv": lambda tmp: _write_csv_to(tmp, items, precision=3, unit=unit),
+        "json": lambda tmp: _write_json_to(tmp, items, meta=meta, precision=3, unit=unit),
     }
     with contextlib.ExitStack() as stack:  # every temp file renamed only after all were written
         for fmt, p in targets.items():

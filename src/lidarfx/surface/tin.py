@@ -100,7 +100,7 @@ def tin_interpolate(xy: np.ndarray, values: np.ndarray, query: np.ndarray, *, ne
     when ``nearest_outside`` (else NaN).  Fewer than 3 points or collinear
     points fall back to the nearest value everywhere.  Coordinates should be
     local (small numbers) for accuracy.  Regular grids, with their many
-    cocircular points, are better jittered first (:func:`lidarfx.ground.grid.inpaint`):
+    cocircular points, are better jittered first (:func:`lidarfx.surface.grid.inpaint`):
     Qhull is then about twice as fast and the triangulation unique.
 
     ``max_points``: with more known points than this, the queries are answered
