@@ -271,7 +271,7 @@ def test_cross_validate_leaves_the_buffer_out_of_training():
                       terrain_augment=0)
     seen = []
     fit = cfg.fit_matrix
-    cfg.fit_matrix = lambda Xf, yf: (seen.append(Xf[:, 0].astype(np.int64)), fit(Xf, yf))[1]
+    cfg.fit_matrix = lambda Xf, yf, *a, **k: (seen.append(Xf[:, 0].astype(np.int64)), fit(Xf, yf))[1]
     cm, per_fold, _ = cross_validate(X, y, folds, cfg, 3, exclude=near)
     assert cm.sum() == len(y)  # every point is tested once
     for f, rows, pf in zip(range(3), seen, per_fold):

@@ -134,6 +134,7 @@ def test_the_checks_agree_with_numba_without_importing_it(tmp_path, monkeypatch)
     src = tmp_path / "pkg" / "mod.py"
     src.parent.mkdir()
     src.write_text("x = 1\n")
+    monkeypatch.setattr(numba.config, "CACHE_DIR", "")
     assert _prebuilt.cache_path(src) == numba_path(src) == src.parent / "__pycache__"
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "nbcache"))
     assert _prebuilt.cache_path(src) == numba_path(src) == tmp_path / "nbcache" / _prebuilt.cache_subpath(src)
