@@ -1204,11 +1204,11 @@ def test_ign_default_pipeline_regression(ign_result):
     Measured (docs/classification.md §7, 2026-11-22): OA 0.955, mean F1 0.944, ≈ 30 s; the usual
     pipeline (jakteristics 1/2/3 m + z + balanced RF) gets OA 0.43 on this split.
     """
-    sec, seconds = ign_result
+    sec, _ = ign_result
     m = sec["metrics"]
     assert m["oa"] >= 0.95 and m["mean_f1"] >= 0.93, m
     assert sec["files"][str(IGN_TEST[0])]["oa"] >= 0.97
-    assert seconds < 200, seconds  # a third of the usual pipeline's time here (benchmarks/bench_classify.py)
+    # its time against the usual pipeline's is measured by benchmarks/bench_classify.py, not here
 
 
 @pytest.mark.slow

@@ -769,21 +769,22 @@ def test_convert_leaves_input_unchanged(tmp_path):
     assert np.array_equal(read(tmp_path / "out.npz")["treeID"], laspy.read(src)["treeID"])
 
 
-# --------------------------------------------------------------------- speed
+# --------------------------------------------------------------------- size
 @pytest.mark.slow
-def test_write_one_million_points_with_20_features_is_fast(tmp_path):
-    import time
-
+def test_write_one_million_points_with_20_features(tmp_path):
+    """A million points with 20 extra-bytes features round-trip exactly (write speeds are measured
+    in benchmarks/, e.g. bench_features.py's CLI row with its LAS write)."""
     rng = np.random.default_rng(0)
     n = 1_000_000
     cloud = PointCloud(
         rng.uniform(0, 100, (n, 3)) + [500_000, 5_400_000, 100],
         {f"feature_{i:02d}": rng.random(n).astype(np.float32) for i in range(20)},
     )
-    t0 = time.perf_counter()
     write(cloud, tmp_path / "big.las")
-    assert time.perf_counter() - t0 < 1.5
-    assert laspy.open(tmp_path / "big.las").header.point_count == n
+    las = laspy.read(tmp_path / "big.las")
+    assert las.header.point_count == n
+    assert np.array_equal(np.asarray(las["feature_07"]), cloud["feature_07"])
+    assert np.abs(las.x - cloud.xyz[:, 0]).max() <= las.header.scales[0] / 2 + 1e-9
 
 
 def test_format_for_classes_upgrades_legacy_formats_only():
