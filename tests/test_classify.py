@@ -1251,7 +1251,7 @@ def test_default_list_with_inputs_left_out(facades, tmp_path, capsys):
     assert main(args[:-1] + ["--json"]) == 0
     assert json.loads(capsys.readouterr().out)["features"] == 27
     # ... as the list given explicitly does: the default list's other inputs and the ALS building rule
-    assert main(args + ["--features", "default,-return_ratio,-number_of_returns", "--json"]) == 0
+    assert main(args + ["--features", "default,-return_ratio,-number_of_returns", "--json", "--force"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["features"] == 27 and summary["min_building_area"] == 10.0  # 26 at 0.5 m + HAG
     # predicting: the building rule runs, its see-through test says it cannot

@@ -427,7 +427,7 @@ def test_cli_train_options_reach_the_model(ignore_file, capsys, args, want):
     """Every training option of the CLI lands in the model's stored configuration."""
     d, p = ignore_file
     m = d / "options.skops"
-    assert main(["classify", "train", str(p), "--model", str(m), "--classes", "2,5,6", "-q", *args]) == 0
+    assert main(["classify", "train", str(p), "--model", str(m), "--classes", "2,5,6", "-q", "--force", *args]) == 0
     capsys.readouterr()
     assert main(["classify", "info", str(m), "--json"]) == 0
     cfg = json.loads(capsys.readouterr().out)["config"]

@@ -400,7 +400,7 @@ def noisy_las(tmp_path_factory):
 
 def run_cli(src, tmp_path, *args):
     out = tmp_path / "out.las"
-    assert main(["features", str(src), str(out), "-q", *args]) == 0
+    assert main(["features", str(src), str(out), "-q", "--force", *args]) == 0  # one output, run after run
     return lidarfx.read(out), lidarfx.read(src).xyz
 
 

@@ -685,7 +685,9 @@ def test_points_with_nan_coordinates(tmp_path):
     out, tif = tmp_path / "o.xyz", tmp_path / "d.tif"
     assert main(["ground", str(src), str(out), "--hag", "--dtm", str(tif), "-q"]) == 0
     rows = [line.split() for line in out.read_text().splitlines()[1:]]
-    assert rows[1][0] == "nan" and rows[1][3] == "1" and rows[1][4] == "nan"
+    # the reader leaves the NaN point out (with a warning: docs/io.md); the others are classified
+    assert [r[:3] for r in rows] == [["1.000", "2.000", "3.000"], ["4.000", "5.000", "6.000"],
+                                     ["2.000", "6.000", "3.100"]]
     assert tif.exists()
 
 

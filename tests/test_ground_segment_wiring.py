@@ -203,7 +203,7 @@ def _plateau_file(tmp_path: Path, h: float = 1.2) -> tuple[Path, np.ndarray]:
 def _ground_cli(tmp_path: Path, src: Path, *opts: str) -> np.ndarray:
     """``lidarfx ground`` with ``opts``; the classes written."""
     out = tmp_path / "out.las"
-    assert main(["ground", str(src), str(out), "--json", "-q", *opts]) == 0
+    assert main(["ground", str(src), str(out), "--json", "-q", "--force", *opts]) == 0  # one output, run after run
     return lidarfx.read(out)["classification"]
 
 
@@ -258,7 +258,7 @@ def test_cli_dtm_and_ground_dtm_use_the_resolution(tmp_path, capsys):
     # with class 1 ignored only the four class-7 points (z = 0) are candidates: a flat DTM
     for opts, top in (((), H0), (("--window", "4"), H0 + 1.2), (("--window", "4", "--ignore-classes", "1"), H0)):
         d = tmp_path / "d.asc"
-        assert main(["dtm", str(src), str(d), "--classify", "--cell", "1", "-r", "2", "-q", *opts]) == 0
+        assert main(["dtm", str(src), str(d), "--classify", "--cell", "1", "-r", "2", "-q", "--force", *opts]) == 0
         grid = np.loadtxt(d, skiprows=6)
         # row 0 = north; the plateau's points have y = 15.5 … 23.5 m: DTM rows centred at y = 17, 19, 21
         yc = N + 40 - (np.arange(20) + 0.5) * 2

@@ -354,7 +354,7 @@ def test_cli_min_building_area(tmp_path, capsys, town_model):
     assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--json", "-q"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["min_building_area"] == 10.0 and s["small_buildings"]["components"] >= 1
-    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--json", "-q",
+    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--force", "--json", "-q",
                  "--min-building-area", "0"]) == 0
     s0 = json.loads(capsys.readouterr().out)
     assert s0["min_building_area"] == 0.0 and s0["small_buildings"] is None
@@ -364,13 +364,13 @@ def test_cli_min_building_area(tmp_path, capsys, town_model):
     six, six0 = s["classes"].get(6, s["classes"].get("6")), s0["classes"].get(6, s0["classes"].get("6"))
     assert six0 - six == sb["relabelled_points"] + sb["see_through_points"]
     assert sum(s["classes"].values()) == sum(s0["classes"].values()) == s["points"]
-    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "-q", "--min-building-area", "-3"]) == 2
+    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--force", "-q", "--min-building-area", "-3"]) == 2
     assert "minimum building area" in capsys.readouterr().err
     assert s["max_multi_return_share"] == 0.5 and s["small_buildings"]["see_through_components"] == 0  # no returns
-    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--json", "-q",
+    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--force", "--json", "-q",
                  "--max-multi-return-share", "1"]) == 0
     assert json.loads(capsys.readouterr().out)["max_multi_return_share"] == 1.0
-    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "-q", "--max-multi-return-share", "2"]) == 2
+    assert main(["classify", "predict", str(src), str(out), "-m", str(m), "--force", "-q", "--max-multi-return-share", "2"]) == 2
     assert "multi-return share" in capsys.readouterr().err
 
 

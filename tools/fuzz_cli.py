@@ -1,7 +1,8 @@
 """Fuzz the command line with bad input (run by hand; not part of the test suite).
 
-    python tools/fuzz_cli.py                 # every part, about 15 minutes on 2 cores
-    python tools/fuzz_cli.py files synth     # only some parts: files, options, synth
+    python tools/fuzz_cli.py                 # the parts files, options, synth: about 15 minutes on 2 cores
+    python tools/fuzz_cli.py files synth     # only some parts: files, options, synth, mutants
+    python tools/fuzz_cli.py mutants --rounds 10   # hostile copies of the real data, 10 seeds
 
 The guide's rule for bad input: a one-line error and exit code 2 — never a traceback, a crash,
 a half-written output or a modified input.  Three parts check it:
@@ -10,7 +11,11 @@ a half-written output or a modified input.  Three parts check it:
   text, NaN coordinates, word columns, and clouds of 0, 1 and 50 identical points;
 * ``options``: every numeric option of every command with 0, -1, nan, inf, 1e308 and 1e-300
   (integer options: 0, -1, 10^9 and a 23-digit number);
-* ``synth``: every scene parameter of ``lidarfx synth -p KEY=VALUE`` with 0, -1, nan and 1e9.
+* ``synth``: every scene parameter of ``lidarfx synth -p KEY=VALUE`` with 0, -1, nan and 1e9;
+* ``mutants`` (not in the default set): the hostile-file suite of ``tests/test_reliability_fuzz.py``
+  at a larger budget: ``--rounds N`` seeds from ``--first-seed`` (each round 300 mutated copies
+  of the real data and 3,840 runs, 3 to 4 minutes on 2 cores), ``--workers``, ``--record
+  FILE`` for every run's result as JSON.  It needs the real data (``shared/data/real``).
 
 A run is BAD when it prints a traceback, exits with another code than 0 or 2, leaves output behind
 after an error, modifies an input, or runs longer than the time limit (``--timeout``, default 120 s).
@@ -196,21 +201,71 @@ def part_synth(d, timeout, bad):
                     check(["synth", kind, "out/s.laz", "-p", f"{p}={v}"], d, timeout, bad)
 
 
+def part_mutants(d, timeout, bad, *, rounds=1, first_seed=0, workers=2, record=None):
+    """The hostile-file suite (tests/fuzzcorpus.py) over ``rounds`` seeds."""
+    import json
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import fuzzcorpus as fc
+
+    sources = fc.cut_sources(d / "sources")
+    if not sources:
+        sys.exit(f"no real data in {fc.REAL} (see its SOURCES.md)")
+    mutants = [m for seed in range(first_seed, first_seed + rounds)
+               for m in fc.build_corpus(sources, d / "mutants", seed=seed)]
+    cases = fc.plan(mutants, per_command=fc.PER_COMMAND * rounds)
+    print(f"{len(mutants)} mutants, {len(cases)} runs", flush=True)
+    done = [0]
+
+    def log(r):
+        done[0] += 1
+        if r["i"] >= 0 and r["problems"]:
+            c = cases[r["i"]]
+            print(f"BAD  {c.command} on {c.mutant} ({c.kind}: {c.what}): {'; '.join(r['problems'])}", flush=True)
+        elif done[0] % 500 == 0:
+            print(f"{done[0]} runs", flush=True)
+
+    out = fc.run_cases(cases, d / "run", workers=workers, case_seconds=timeout, warmup=fc.warmup_argvs(sources),
+                       log=log)
+    print(fc.summary(out, cases).splitlines()[0])
+    if record:
+        Path(record).write_text(json.dumps({"mutants": len(mutants), "runs": len(cases), "seconds": out.seconds,
+                                            "cases": [c.__dict__ for c in cases], "results": out.results}, default=str))
+    for r in out.bad():
+        c = cases[r["i"]]
+        bad.append((c.argv, f"{c.kind}: {c.what}: {'; '.join(r['problems'])}"))
+
+
 def main() -> int:
+    import functools
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("parts", nargs="*", metavar="PART", help="files, options, synth (default: all three)")
-    ap.add_argument("--timeout", type=float, default=120.0, help="seconds per run (default 120)")
+    ap.add_argument("parts", nargs="*", metavar="PART",
+                    help="files, options, synth, mutants (default: files, options and synth)")
+    ap.add_argument("--timeout", type=float, default=None,
+                    help="seconds per run (default 120; mutants: 30)")
+    ap.add_argument("--rounds", type=int, default=1, help="mutants: seeds to run (default 1)")
+    ap.add_argument("--first-seed", type=int, default=0, help="mutants: the first seed (default 0)")
+    ap.add_argument("--workers", type=int, default=2, help="mutants: worker processes (default 2)")
+    ap.add_argument("--record", default=None, metavar="FILE", help="mutants: every run's result as JSON")
     args = ap.parse_args()
     parts = args.parts or ["files", "options", "synth"]
-    unknown = sorted(set(parts) - {"files", "options", "synth"})
+    unknown = sorted(set(parts) - {"files", "options", "synth", "mutants"})
     if unknown:
-        ap.error(f"unknown part(s) {', '.join(unknown)}; choose from files, options, synth")
+        ap.error(f"unknown part(s) {', '.join(unknown)}; choose from files, options, synth, mutants")
+    if args.rounds < 1 or args.workers < 1:
+        ap.error("--rounds and --workers must be at least 1")
+    mutants = functools.partial(part_mutants, rounds=args.rounds, first_seed=args.first_seed, workers=args.workers,
+                                record=args.record)
     bad: list = []
     with tempfile.TemporaryDirectory(prefix="lidarfx-fuzz-") as tmp:
         d = Path(tmp)
-        make_inputs(d)
+        if {"files", "options"} & set(parts):
+            make_inputs(d)
         for part in parts:
-            {"files": part_files, "options": part_options, "synth": part_synth}[part](d, args.timeout, bad)
+            timeout = args.timeout or (30.0 if part == "mutants" else 120.0)
+            {"files": part_files, "options": part_options, "synth": part_synth,
+             "mutants": mutants}[part](d, timeout, bad)
     print(f"\n{len(bad)} bad run(s)")
     for argv, why in bad:
         print(f"  lidarfx {' '.join(argv)}: {why}")

@@ -30,6 +30,7 @@ __all__ = [
     "extract_breaklines",
     "detect_small_parts",
     "vectorise_members",
+    "Pipeline",
     "__version__",
 ]
 
@@ -72,6 +73,10 @@ def __getattr__(name: str):
         from .colour import colour_cloud
 
         return colour_cloud
+    if name == "Pipeline":
+        from .pipeline import Pipeline
+
+        return Pipeline
     if name in ("detect_small_parts", "vectorise_members"):
         from . import tower
 

@@ -766,6 +766,33 @@ def _length_2d(v: np.ndarray) -> float:
 
 
 # --------------------------------------------------------------------------- main
+def check_breakline_options(*, radius: Any = DEFAULTS["radius"], min_curvature: Any = DEFAULTS["min_curvature"],
+                            curvature_ratio: Any = DEFAULTS["curvature_ratio"],
+                            patch_length: Any = DEFAULTS["patch_length"], patch_width: Any = DEFAULTS["patch_width"],
+                            gap: Any = DEFAULTS["gap"], step: Any = DEFAULTS["step"],
+                            min_angle: Any = DEFAULTS["min_angle"], min_points: Any = DEFAULTS["min_points"],
+                            max_rms: Any = DEFAULTS["max_rms"], min_length: Any = DEFAULTS["min_length"],
+                            join: Any = DEFAULTS["join"], simplify: Any = DEFAULTS["simplify"]) -> dict[str, Any]:
+    """Every parameter check of :func:`extract_breaklines`, before any work (metres, as given);
+    returns the parameters as numbers (None stays None: the data's default)."""
+    for name, val, open_lo in (("patch_length", patch_length, True), ("patch_width", patch_width, True),
+                               ("gap", gap, False), ("step", step, True), ("join", join, False)):
+        if val is not None:
+            check_number(name, val, 0.0, 1e4, open_lo=open_lo)
+    out = {
+        "min_angle": check_number("min_angle", min_angle, 0.0, 90.0, open_lo=False),
+        "min_points": check_int("min_points", min_points, 3, 10**6),
+        "curvature_ratio": check_number("curvature_ratio", curvature_ratio, 0.0, 1.0, open_lo=True),
+        "min_length": check_number("min_length", min_length, 0.0, 1e6, open_lo=False),
+        "simplify": check_number("simplify", simplify, 0.0, 1e4, open_lo=False),
+        "radius": None if radius is None else check_number("radius", radius, 0.0, 1e4, open_lo=True),
+        "min_curvature": None if min_curvature is None else check_number("min_curvature", min_curvature, 0.0, 1e6,
+                                                                         open_lo=True),
+        "max_rms": None if max_rms is None else check_number("max_rms", max_rms, 0.0, 1e4, open_lo=True),
+    }
+    return out
+
+
 def extract_breaklines(
     cloud: PointCloud,
     *,
@@ -805,22 +832,13 @@ def extract_breaklines(
         raise LidarfxError("extract_breaklines expects a PointCloud (see lidarfx.read)")
     lengths = {"patch_length": (patch_length, 12.0, True), "patch_width": (patch_width, 5.0, True),
                "gap": (gap, 0.6, False), "step": (step, 4.0, True), "join": (join, 8.0, False)}
-    for name, (val, _, open_lo) in lengths.items():
-        if val is not None:
-            check_number(name, val, 0.0, 1e4, open_lo=open_lo)
-    prm = {
-        "min_angle": check_number("min_angle", min_angle, 0.0, 90.0, open_lo=False),
-        "min_points": check_int("min_points", min_points, 3, 10**6),
-    }
-    curvature_ratio = check_number("curvature_ratio", curvature_ratio, 0.0, 1.0, open_lo=True)
-    min_length = check_number("min_length", min_length, 0.0, 1e6, open_lo=False)
-    simplify = check_number("simplify", simplify, 0.0, 1e4, open_lo=False)
-    if radius is not None:
-        radius = check_number("radius", radius, 0.0, 1e4, open_lo=True)
-    if min_curvature is not None:
-        min_curvature = check_number("min_curvature", min_curvature, 0.0, 1e6, open_lo=True)
-    if max_rms is not None:
-        max_rms = check_number("max_rms", max_rms, 0.0, 1e4, open_lo=True)
+    c = check_breakline_options(radius=radius, min_curvature=min_curvature, curvature_ratio=curvature_ratio,
+                                patch_length=patch_length, patch_width=patch_width, gap=gap, step=step,
+                                min_angle=min_angle, min_points=min_points, max_rms=max_rms, min_length=min_length,
+                                join=join, simplify=simplify)
+    prm = {"min_angle": c["min_angle"], "min_points": c["min_points"]}
+    curvature_ratio, min_length, simplify = c["curvature_ratio"], c["min_length"], c["simplify"]
+    radius, min_curvature, max_rms = c["radius"], c["min_curvature"], c["max_rms"]
     unit = metres_per_unit(cloud, units)
     if unit != 1.0:  # metres -> coordinate units (curvatures 1/m -> 1/unit)
         lengths = {k: (None if v is None else float(v) / unit, f, o) for k, (v, f, o) in lengths.items()}

@@ -6,7 +6,9 @@ colour`` (:mod:`lidarfx.cli.colour`) is a thin layer over :func:`colour_cloud`.
 
 Morphology colours (:func:`morphology_hsv`), per point with unit normal n:
 
-* the normal is flipped up first: n → −n when n_z < 0 (so n and −n give the same colour);
+* the normal is flipped up first: n → −n when n_z < 0 (so n and −n give the same colour; a
+  horizontal normal, |n_z| < 1e-6, is flipped to n_x > 0, or along y to n_y > 0, as in
+  :mod:`lidarfx.features`);
 * slope s = arccos(n_z) in degrees (0 = horizontal, 90 = vertical);
 * aspect a = atan2(n_x, n_y) mod 360 in degrees, clockwise from North (x = East, y = North):
   the direction the up-facing normal leans to, i.e. the dip direction of the surface;
@@ -119,6 +121,15 @@ def _check_view(view: str) -> str:
 
 
 # --------------------------------------------------------------------------- morphology
+def _points_down(u: np.ndarray) -> np.ndarray:
+    """Rows of unit vectors ``u`` that the up orientation flips (:func:`lidarfx.features.plane.points_down`:
+    z < 0, or, horizontal, x < 0, or, along y, y < 0); rounding alone does not decide a wall's side."""
+    from .features.plane import HORIZONTAL
+
+    x, y, z = u[:, 0], u[:, 1], u[:, 2]
+    return np.where(np.abs(z) >= HORIZONTAL, z < 0, np.where(np.abs(x) >= HORIZONTAL, x < 0, y < 0))
+
+
 def _sun_vector(azimuth: float, altitude: float) -> np.ndarray:
     az, alt = math.radians(azimuth), math.radians(altitude)
     return np.array([math.cos(alt) * math.sin(az), math.cos(alt) * math.cos(az), math.sin(alt)])
@@ -145,7 +156,7 @@ def morphology_hsv(normals, *, sun_azimuth: float = 315.0, sun_altitude: float =
     ok = np.isfinite(length) & (length > 0)
     u = np.zeros_like(n)
     u[ok] = n[ok] / length[ok, None]
-    u[u[:, 2] < 0] *= -1.0
+    u[_points_down(u)] *= -1.0
     hsv = np.zeros_like(n)
     aspect = np.degrees(np.arctan2(u[ok, 0], u[ok, 1])) % 360.0
     hue = aspect / 360.0

@@ -114,6 +114,29 @@ def _length(name: str, value: Any, default: float) -> float:
     return v
 
 
+def check_edge_options(radius: Any = None, *, labels: Sequence[str] = EDGE_LABELS, min_points: Any = 8, seed: Any = 0,
+                       merge_angle: Any = 5.0, **lengths: Any) -> tuple[int, int]:
+    """Every option check of :func:`extract_edges`, before any work: the labels, ``min_points``,
+    ``seed``, ``merge_angle``, and ``radius`` and the ``lengths`` (``link``, ``threshold``,
+    ``max_gap``, ``join``, ``simplify``, ``plane_threshold``, ``min_length``; None = the default)
+    positive.  Returns ``(min_points, seed)`` as integers."""
+    from .structures import LABELS
+
+    names = {v: k for k, v in LABELS.items()}
+    bad = [lab for lab in labels if lab not in names]
+    if bad or not labels:
+        raise LidarfxError(f"labels must be structure names ({', '.join(n for n in names if n != 'unclassified')}), "
+                           f"got {', '.join(map(str, bad)) or 'none'}")
+    min_points = check_int("min_points", min_points, 2, 1_000_000)
+    seed = check_int("seed", seed, 0, 2**32 - 1)
+    if not (isinstance(merge_angle, (int, float)) and not isinstance(merge_angle, bool) and 0 < merge_angle <= 45):
+        raise LidarfxError(f"merge_angle must be in (0, 45] degrees, got {merge_angle!r}")
+    for name, value in {"radius": radius, **lengths}.items():
+        if value is not None:
+            _length(name, value, 0.0)
+    return min_points, seed
+
+
 def extract_edges(
     cloud: PointCloud,
     radius: float | None = None,
@@ -183,14 +206,10 @@ def extract_edges(
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("extract_edges expects a PointCloud (see lidarfx.read)")
     names = {v: k for k, v in LABELS.items()}
-    bad = [lab for lab in labels if lab not in names]
-    if bad or not labels:
-        raise LidarfxError(f"labels must be structure names ({', '.join(n for n in names if n != 'unclassified')}), "
-                           f"got {', '.join(map(str, bad)) or 'none'}")
-    min_points = check_int("min_points", min_points, 2, 1_000_000)
-    seed = check_int("seed", seed, 0, 2**32 - 1)
-    if not (isinstance(merge_angle, (int, float)) and not isinstance(merge_angle, bool) and 0 < merge_angle <= 45):
-        raise LidarfxError(f"merge_angle must be in (0, 45] degrees, got {merge_angle!r}")
+    min_points, seed = check_edge_options(radius, labels=labels, min_points=min_points, seed=seed,
+                                          merge_angle=merge_angle, link=link, threshold=threshold, max_gap=max_gap,
+                                          join=join, simplify=simplify, plane_threshold=plane_threshold,
+                                          min_length=min_length)
     if len(cloud) == 0:
         raise LidarfxError("the point cloud is empty")
     if use_structure and "structure" not in cloud:

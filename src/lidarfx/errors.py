@@ -1,4 +1,8 @@
-"""Errors a user can act on.  The CLI prints them as one line and exits with code 2."""
+"""Errors a user can act on.  The CLI prints them as one line and exits with code 2 (bad input
+or usage) or 1 (the environment failed: disk full, out of memory, a read-only file system)."""
+from __future__ import annotations
+
+import errno as _errno
 
 
 class LidarfxError(Exception):
@@ -6,6 +10,26 @@ class LidarfxError(Exception):
 
 
 EXIT_USAGE = 2
+"""Exit code of bad input or usage (a one-line error naming what to change)."""
+EXIT_FAILURE = 1
+"""Exit code of a run the environment stopped: disk full, file too large, read-only file system,
+quota exceeded, an I/O error, out of memory (:func:`environment_failure`)."""
+
+ENVIRONMENT_ERRNOS = frozenset(getattr(_errno, name) for name in ("ENOSPC", "EDQUOT", "EFBIG", "EROFS", "EIO", "ENOMEM")
+                               if hasattr(_errno, name))
+"""OSError numbers that mean the machine, not the input, stopped the run."""
+
+
+def environment_failure(exc: BaseException | None) -> BaseException | None:
+    """The :class:`MemoryError` or the OSError of :data:`ENVIRONMENT_ERRNOS` that ``exc`` is or
+    was raised from (its ``__cause__`` / ``__context__`` chain), else None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, MemoryError) or (isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS):
+            return exc
+        exc = exc.__cause__ if exc.__cause__ is not None else (None if exc.__suppress_context__ else exc.__context__)
+    return None
 
 
 class LidarfxWarning(UserWarning):

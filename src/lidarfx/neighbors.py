@@ -523,11 +523,13 @@ def _build(xyz: np.ndarray, origin: np.ndarray, cell: float):
 
 
 def default_cell_for_knn(pts_local: np.ndarray, k: int) -> float:
-    """A column size holding about k points per column on average (2-D density)."""
+    """A column size holding about k points per column on average (2-D density; along the
+    longer side when the plan view is a line, e.g. a vertical wall: millimetre columns there
+    made every query walk thousands of empty rings)."""
     n = max(pts_local.shape[0], 1)
     ext = np.ptp(pts_local[:, :2], axis=0) if n > 1 else np.ones(2)
     area = max(float(ext[0]) * float(ext[1]), 1e-6)
-    return max(math.sqrt(area * k / n), 1e-3)
+    return max(math.sqrt(area * k / n), k * float(ext.max()) / n, 1e-3)
 
 
 class NeighborIndex:

@@ -118,11 +118,23 @@ def _error(expr: str, pos: int, msg: str) -> LidarfxError:
 # AST: tuples ("num", value) ("name", str) ("bool", b) ("neg", e) ("bin", op, a, b)
 # ("cmp", [ops], [operands]) ("in", negate, e, [items]) ("and"/"or", [e...]) ("not", e)
 # ----------------------------------------------------------------------------
+MAX_DEPTH = 50
+"""Deepest nesting of parentheses, ``not``, signs and powers an expression may have, and (times four)
+of its tree (a sum of 200 terms): deeper is refused, not a recursion error."""
+
+
 class _Parser:
     def __init__(self, expr: str) -> None:
         self.expr = expr
         self.toks = _tokenize(expr)
         self.i = 0
+        self.depth = 0
+
+    def nest(self, step: int) -> None:
+        """Enter (+1) or leave (-1) a nested part; refuses more than :data:`MAX_DEPTH` levels."""
+        self.depth += step
+        if self.depth > MAX_DEPTH:
+            raise self.fail(f"expression nested too deeply (more than {MAX_DEPTH} levels)")
 
     # helpers
     @property
@@ -180,7 +192,10 @@ class _Parser:
     def not_expr(self):
         if self.at("kw", "not"):
             self.take()
-            return ("not", self.not_expr())
+            self.nest(1)
+            node = ("not", self.not_expr())
+            self.nest(-1)
+            return node
         return self.comparison()
 
     _CMP = ("<", "<=", ">", ">=", "==", "!=")
@@ -245,7 +260,9 @@ class _Parser:
     def unary(self):
         if self.at("op", "-", "+"):
             op = self.take().text
+            self.nest(1)
             inner = self.unary()
+            self.nest(-1)
             return ("neg", inner) if op == "-" else inner
         return self.power()
 
@@ -253,7 +270,9 @@ class _Parser:
         node = self.atom()
         if self.at("op", "**"):
             self.take()
+            self.nest(1)
             node = ("bin", "**", node, self.unary())
+            self.nest(-1)
         return node
 
     def atom(self):
@@ -276,7 +295,9 @@ class _Parser:
             return ("name", t.text, t.pos)
         if t.kind == "op" and t.text == "(":
             self.take()
+            self.nest(1)
             node = self.or_expr()
+            self.nest(-1)
             if self.at("op", ","):
                 raise self.fail("tuples are only allowed after 'in'")
             self.expect_op(")")
@@ -325,7 +346,22 @@ def parse(expr: str) -> Expression:
         raise LidarfxError(f"the expression must be a string, got {type(expr).__name__}")
     if len(expr) > 10_000:
         raise LidarfxError("expression too long (more than 10,000 characters)")
-    return Expression(expr, _Parser(expr).parse())
+    tree = _Parser(expr).parse()
+    if _tree_depth(tree) > 4 * MAX_DEPTH:  # x + x + ... parses in a loop but evaluates recursively
+        raise LidarfxError(f"expression too deep (more than {4 * MAX_DEPTH} nested operations, e.g. terms of a sum)")
+    return Expression(expr, tree)
+
+
+def _tree_depth(tree) -> int:
+    """Depth of a parse tree (counted without recursion)."""
+    deepest, todo = 0, [(tree, 1)]
+    while todo:
+        node, d = todo.pop()
+        deepest = max(deepest, d)
+        for child in node[1:] if isinstance(node, tuple) else node:
+            if isinstance(child, (tuple, list)):
+                todo.append((child, d + 1))
+    return deepest
 
 
 def names_in(expr: str) -> list[str]:

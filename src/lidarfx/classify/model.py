@@ -708,6 +708,12 @@ def _sklearn_version() -> str:
     return sklearn.__version__
 
 
+MAX_MODEL_BYTES = 2**31
+"""A model file that would unpack to more bytes than this is refused unread (the shipped model: 5 MB)."""
+MAX_ZIP_RATIO = 500
+"""A member of a model file (over 1 MiB) that packs more tightly than this is refused unread."""
+
+
 def file_types(path: str | os.PathLike) -> set[str]:
     """Every ``module.class`` named in a skops file's schema (read without building anything)."""
     import json
@@ -725,9 +731,17 @@ def file_types(path: str | os.PathLike) -> set[str]:
 
     try:
         with zipfile.ZipFile(path) as z:
-            schema = json.loads(z.read("schema.json"))
-    except Exception as exc:
-        raise LidarfxError(f"{path}: not a skops model file ({type(exc).__name__}: {exc})") from None
+            infos = z.infolist()
+            total = sum(i.file_size for i in infos)
+            bomb = total > MAX_MODEL_BYTES or any(i.file_size > 2**20 and i.file_size > MAX_ZIP_RATIO * i.compress_size
+                                                  for i in infos)
+            if not bomb:
+                schema = json.loads(z.read("schema.json"))
+    except Exception as exc:  # also RecursionError (nested too deeply) and huge integers (ValueError)
+        raise LidarfxError(f"{path}: not a skops model file ({type(exc).__name__}: {str(exc)[:200]})") from None
+    if bomb:
+        raise LidarfxError(f"{path}: refusing to load: it would unpack to {total:,} bytes (a lidarfx model is far "
+                           f"smaller and packs at most {MAX_ZIP_RATIO}:1)")
     acc: set[str] = set()
     walk(schema, acc)
     return acc

@@ -11,11 +11,11 @@ import shlex
 import sys
 import warnings
 
-from ..errors import EXIT_USAGE, LidarfxError, LidarfxWarning
+from ..errors import EXIT_FAILURE, EXIT_USAGE, LidarfxError, LidarfxWarning, environment_failure
 
-COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "classify",
+COMMAND_MODULES = ["info", "convert", "features", "synth", "demo", "segment", "select", "ground", "surface", "classify",
                    "eigenclass", "edges", "powerlines", "discontinuities", "colour", "breaklines", "thin", "section", "parts",
-                   "members", "render", "report"]
+                   "members", "render", "report", "run", "crop", "merge", "filter", "reproject"]
 
 EPILOG = """examples:
   lidarfx demo                                   # the main job on synthetic scenes -> lidarfx-demo/index.html
@@ -60,10 +60,28 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"lidarfx {__version__}")
+    parser.add_argument("--force", action="store_true", default=argparse.SUPPRESS, help=FORCE_HELP)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in COMMAND_MODULES:
         importlib.import_module(f"{__name__}.{name}").register(sub)
+    _add_force(sub)
     return parser
+
+
+FORCE_HELP = "replace existing output files (without it an existing output is an error, before any work)"
+NO_OUTPUT = {"lidarfx info", "lidarfx ground-eval", "lidarfx classify info", "lidarfx demo"}
+"""Commands without --force: they write nothing, or (demo) always replace their own folder."""
+
+
+def _add_force(sub) -> None:
+    """``--force`` on every command that writes files (also accepted before the command)."""
+    for p in dict.fromkeys(sub.choices.values()):
+        nested = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        if nested:
+            for a in nested:
+                _add_force(a)
+        elif p.prog not in NO_OUTPUT:
+            p.add_argument("--force", action="store_true", default=argparse.SUPPRESS, help=FORCE_HELP)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,28 +104,51 @@ def main(argv: list[str] | None = None) -> int:
 
     warnings.showwarning = _show
     from .. import _numba_cache
+    from .._atomic import OVERWRITE
 
     _numba_cache.announce_compiles()
+    # the run replaces existing outputs only with --force (the Python API always does)
+    token = OVERWRITE.set(bool(getattr(args, "force", False)))
     try:
         rc = args.func(args)
     except LidarfxError as exc:
         print(f"lidarfx: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
-        print(f"lidarfx: error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("lidarfx: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_FAILURE if environment_failure(exc) is not None else EXIT_USAGE
     except BrokenPipeError:  # e.g. `lidarfx info --json f.laz | head`: the reader left
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+        where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
+        print(f"lidarfx: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return EXIT_USAGE
+    except (OSError, MemoryError) as exc:  # the machine stopped the run: disk full, out of memory, ...
+        print(f"lidarfx: error: {failure_line(exc)}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print("lidarfx: interrupted", file=sys.stderr)
+        return 130
     finally:
+        OVERWRITE.reset(token)
         warnings.showwarning = _default_show
     return int(rc or 0)
+
+
+def failure_line(exc: BaseException) -> str:
+    """One line for an OSError or MemoryError that stopped a run, e.g. "no space left on device
+    writing out.laz" (the file the error names)."""
+    import errno
+
+    if isinstance(exc, MemoryError):
+        return "out of memory" + (f" ({exc})" if str(exc) else "")
+    text = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
+    text = text[:1].lower() + text[1:]
+    name = getattr(exc, "filename", None)
+    if not name:
+        return text
+    writing = exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
+    return f"{text} writing {name}" if writing else f"{text}: {name}"
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -39,7 +39,7 @@ xyz = finite_numbers((3,), "a position x,y,z")
 
 
 NUMBER_LIST_OPTIONS = ("--scanner", "--origin", "--rotation", "--reference-plane", "--range",
-                       "--from", "--to", "--normal")
+                       "--from", "--to", "--normal", "--bounds")
 """Options whose value is a comma-separated list of numbers, which may start with a minus sign."""
 _NUMBER_LIST = re.compile(r"^-[0-9.][0-9.eE+\-]*(,[0-9.eE+\- ]*)+$")
 
@@ -121,11 +121,14 @@ def read_input(args):
     return io.read(args.input, columns=columns_of(args), progress=progress), progress
 
 
-def check_output_dir(path: str):
+def check_output_dir(path: str, files: tuple[str, ...] | None = None):
     """An output folder, before any work: not an existing file, its parent exists (it is
-    created at the end, when there is something to write)."""
+    created at the end, when there is something to write).  Without ``--force`` the folder must
+    be new or empty (a command's products never mix with another run's), or, when the command
+    writes only the ``files`` named (a report's ``index.html``), none of those may exist."""
     from pathlib import Path
 
+    from .._atomic import check_new_file, check_new_folder
     from ..errors import LidarfxError
 
     out = Path(path)
@@ -133,6 +136,11 @@ def check_output_dir(path: str):
         raise LidarfxError(f"{out} exists and is not a folder")
     if not out.parent.is_dir() and str(out.parent) not in ("", "."):
         raise LidarfxError(f"output folder's parent does not exist: {out.parent}")
+    if files is None:
+        check_new_folder(out)
+    else:
+        for name in files:
+            check_new_file(out / name)
     return out
 
 

@@ -41,7 +41,7 @@ class ReportJob:
         from ._args import check_output_dir
 
         folder = getattr(args, "report", None)
-        self.dir = check_output_dir(folder) if folder else None
+        self.dir = check_output_dir(folder, files=("index.html",)) if folder else None  # the page is its one file
         self.command = command_line(args)
         self._tmp: str | None = None
 

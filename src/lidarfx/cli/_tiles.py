@@ -46,7 +46,22 @@ def inputs_of(text: str) -> list[str] | str:
 def wants_tiles(args, command: str, by_size: bool = True) -> bool:
     """A chunked run: asked for by an option, or the input is several files, or a folder, or
     (``by_size``: when the command's options run in chunks as given) it holds more points than
-    one chunk may (:func:`lidarfx.tiles.plan.chunk_points_budget`)."""
+    one chunk may (:func:`lidarfx.tiles.plan.chunk_points_budget`).  For a chunked run the
+    output is checked here, before any work: an existing output file, or a non-empty output
+    folder, needs ``--force`` (``--resume`` too: resuming is not replacing a finished output)."""
+    tiled = _wants_tiles(args, command, by_size)
+    if tiled:
+        from .._atomic import check_new_file, check_new_folder
+
+        out = Path(args.output)
+        if out.suffix.lower() in (".las", ".laz"):
+            check_new_file(out)
+        else:
+            check_new_folder(out)
+    return tiled
+
+
+def _wants_tiles(args, command: str, by_size: bool) -> bool:
     from ..errors import LidarfxError
 
     if args.chunk_size == 0:

@@ -136,6 +136,9 @@ def run(args) -> int:
     if args.csv is not None:
         csv_path = Path(args.csv) if args.csv else out.with_suffix(".csv")
         check_output_folder(csv_path)
+        check_output_folder(csv_path.with_suffix(".vertices.csv"))
+    if args.dxf:
+        check_output_folder(args.dxf)
     report = ReportJob(args)
     approx = _read_approximations(args.approximations) if args.approximations else None
     params = dict(radius=args.radius, min_curvature=args.min_curvature, patch_length=args.patch_length,

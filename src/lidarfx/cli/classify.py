@@ -559,7 +559,10 @@ def run_evaluate(args) -> int:
     say = _log(args)
     page_job = ReportJob(args)
     if args.out:
+        from .._atomic import check_new_folder
+
         report_dir(args.out, create=False)  # a file in the way fails before the work
+        check_new_folder(args.out)  # without --force: a new or empty folder
     if args.spatial_blocks < 0:
         raise LidarfxError("--spatial-blocks must be >= 0 (0 = no block folds)")
     if args.bootstrap < 0:

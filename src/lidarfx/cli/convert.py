@@ -56,6 +56,9 @@ def run(args: argparse.Namespace) -> int:
         from ..io.ascii import check_precision
 
         opts["precision"] = check_precision(args.precision)  # before reading
+    from ._args import check_output
+
+    check_output(args.input, args.output)  # the output before reading: format, folder, not over a file
     cloud = read(args.input, columns=args.columns)
     write(cloud, args.output, **opts)
     print(f"{args.input} -> {args.output}: {len(cloud):,} points, {len(cloud.names)} attributes")

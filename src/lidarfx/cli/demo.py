@@ -45,6 +45,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from .._atomic import overwriting
+
+    with overwriting(True):  # the demo's folder is its own: a second run replaces it (no --force)
+        return _run(args)
+
+
+def _run(args) -> int:
     from rich.console import Console
 
     from ..demo import SCENES, run_demo

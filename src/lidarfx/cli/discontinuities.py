@@ -107,9 +107,10 @@ def run(args) -> int:
     res = analyse_discontinuities(cloud, progress=progress, **params)
     t2 = time.perf_counter()
     out.mkdir(exist_ok=True)
+    if cloud_path is not None:  # first: an attribute the format cannot store is refused before any table exists
+        io.write(res.cloud, cloud_path, progress=progress)
     written = write_tables(res, out, meta={"input": str(args.input)})
     if cloud_path is not None:
-        io.write(res.cloud, cloud_path, progress=progress)
         written["cloud"] = str(cloud_path)
     if not args.no_picture:
         written.update(draw_pictures(res, out, name=Path(args.input).name))

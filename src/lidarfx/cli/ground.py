@@ -175,6 +175,15 @@ def _check_raster_path(path: str) -> None:
     if Path(path).suffix.lower() not in RASTER_EXTENSIONS:
         raise LidarfxError(f"{path}: DTM output must end in {', '.join(RASTER_EXTENSIONS)}")
     check_output_folder(path)
+    import importlib.util
+
+    from .._atomic import check_new_file
+
+    # the files written beside it: the CRS of an ESRI grid, the world file of the built-in GeoTIFF writer
+    if Path(path).suffix.lower() == ".asc":
+        check_new_file(Path(path).with_suffix(".prj"))
+    elif importlib.util.find_spec("rasterio") is None:
+        check_new_file(Path(path).with_suffix(".tfw"))
 
 
 def run_ground(args) -> int:

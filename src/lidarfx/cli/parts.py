@@ -79,7 +79,7 @@ def _read_truth(path: str) -> dict:
             truth = json.load(fh)
     except (OSError, UnicodeDecodeError) as exc:
         raise LidarfxError(f"truth {path}: {getattr(exc, 'strerror', None) or exc}") from None
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:  # RecursionError: nested too deeply
         raise LidarfxError(f"truth {path}: not JSON ({exc})") from None
     if not isinstance(truth, dict) or not isinstance(truth.get("bolts"), list):
         raise LidarfxError(f"truth {path}: not the truth of a tower (no list of bolts); "
@@ -110,9 +110,10 @@ def run(args) -> int:
     t2 = time.perf_counter()
     evaluation = evaluate_parts(res, truth) if truth is not None else None
     out.mkdir(exist_ok=True)
+    if cloud_path is not None:  # first: an attribute the format cannot store is refused before any table exists
+        io.write(res.cloud, cloud_path, progress=progress)
     written = write_tables(res, out, meta={"input": str(args.input)}, evaluation=evaluation)
     if cloud_path is not None:
-        io.write(res.cloud, cloud_path, progress=progress)
         written["cloud"] = str(cloud_path)
     if not args.no_picture:
         written["picture"] = draw_picture(res, out / "parts.png", title=Path(args.input).name)

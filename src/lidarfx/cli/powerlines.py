@@ -119,11 +119,12 @@ def run(args) -> int:
     t2 = time.perf_counter()
     lc = load_case_records(res, args.load_case, cond, survey_temperature=args.survey_temp, step=args.step) if cases else []
     out.mkdir(exist_ok=True)
+    if cloud_path is not None:  # first: an attribute the format cannot store is refused before any table exists
+        io.write(res.cloud, cloud_path, progress=progress)
     written = write_tables(res, out, crs=cloud_crs(cloud), step=args.step, load_cases=lc,
                            meta={"input": str(args.input), "conductor": cond.name if cond else None,
                                  "survey_temperature": args.survey_temp if cases else None})
     if cloud_path is not None:
-        io.write(res.cloud, cloud_path, progress=progress)
         written["cloud"] = str(cloud_path)
     picture = out / "wires.png" if not args.no_picture else (report.picture("wires.png") if report.wanted else None)
     if picture:

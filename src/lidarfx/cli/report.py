@@ -87,7 +87,7 @@ def run(args) -> int:
     from ..report.sections import known_labels
 
     # every option before the cloud is read
-    out = check_output_dir(args.outdir)
+    out = check_output_dir(args.outdir, files=("index.html",))  # the page is its one file
     check_int("--max-points", args.max_points, 1, 50_000_000)
     radii = radii_list(None, args.radius) if args.radius else []
     if args.features is not None and not radii:

@@ -95,6 +95,11 @@ def run(args) -> int:
         raise LidarfxError(f"--top is the number of segments listed, 0 or more; got {args.top}")
     if args.picture:
         check_picture_path(args.picture)
+    if not args.no_table:
+        from .._atomic import check_output_folder
+
+        for path in _table_paths(args):
+            check_output_folder(path)
     report = ReportJob(args)
     from ..segment.planes import check_params
 

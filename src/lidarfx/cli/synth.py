@@ -73,7 +73,7 @@ def _params(args: argparse.Namespace) -> dict[str, Any]:
             raise LidarfxError(f"--param expects KEY=VALUE, got {item!r}")
         try:
             value = json.loads(raw)
-        except json.JSONDecodeError:
+        except (ValueError, RecursionError):  # not JSON (also an integer of over 4300 digits): the text itself
             value = raw
         params[key.strip()] = value
     return params
@@ -95,11 +95,15 @@ def run(args: argparse.Namespace) -> int:
         raise LidarfxError(f"unknown synthetic scene {args.kind!r}; known: {', '.join(synth.GENERATORS)}")
     if not args.out:
         raise LidarfxError("missing output file")
-    cloud = synth.generate(args.kind, **_params(args))
+    from .._atomic import atomic_path, check_output_folder
+    from ..io import check_output_path
+
     out = Path(args.out)
     truth_path = Path(str(out) + ".truth.json")
+    check_output_path(out)  # both outputs before the scene is generated
+    check_output_folder(truth_path)
+    cloud = synth.generate(args.kind, **_params(args))
     write(cloud, out)
-    from .._atomic import atomic_path
 
     with atomic_path(truth_path, suffix=".json") as tmp:
         tmp.write_text(_json.dumps(cloud.meta["truth"], indent=1) + "\n", encoding="utf-8")

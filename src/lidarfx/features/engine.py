@@ -40,7 +40,7 @@ from . import slots as S
 from .curvature import quadric_curvatures, solve_sym6
 from .eigen import eigen_features, eigh3
 from .histogram import histogram_features
-from .plane import orient_normal, write_plane
+from .plane import orient_normal, points_down, write_plane
 
 KIND_SPHERE = 0
 KIND_CYLINDER = 1
@@ -410,7 +410,7 @@ def point_features(
                     slope = write_plane(o, col, S.NORMAL_X, nxv, nyv, nzv, cx, cy, cz, want_slope)
                     S.put(o, col, S.PLANE_STD, math.sqrt(lam[2]))
                     e1x, e1y, e1z = v1[0], v1[1], v1[2]
-                    if e1z < 0.0 or (e1z == 0.0 and e1x < 0.0):
+                    if points_down(e1x, e1y, e1z):
                         e1x, e1y, e1z = -e1x, -e1y, -e1z
                     S.put(o, col, S.EIGENVECTOR1_X, e1x)
                     S.put(o, col, S.EIGENVECTOR1_Y, e1y)

@@ -9,7 +9,7 @@ import numpy as np
 from ..cloud import PointCloud
 from ..crs import cloud_crs
 from ..errors import LidarfxError
-from ..surface.raster import Raster
+from ..surface.raster import Raster, grid_layout
 from ..surface.tin import TIN_TILE_POINTS, tin_interpolate
 
 __all__ = ["dtm", "height_above_ground", "ground_mask_of"]
@@ -31,6 +31,9 @@ def ground_mask_of(cloud: PointCloud, ground: Any = None) -> np.ndarray:
         raise LidarfxError(f"ground must be a boolean mask of length {len(cloud)}, got {mask.dtype} {mask.shape}")
     return mask
 
+
+MAX_CELLS = 400_000_000
+"""Largest DTM (cells) :func:`dtm` makes."""
 
 MAX_RESOLUTION = 1e9
 """Largest DTM cell (map units) :func:`dtm` accepts."""
@@ -116,12 +119,7 @@ def dtm(
         if not np.all(hi >= lo):
             raise LidarfxError(f"bounds must be (xmin, ymin, xmax, ymax), got {bounds!r}")
     r = float(resolution)
-    x0 = math.floor(lo[0] / r) * r
-    y0 = math.floor(lo[1] / r) * r
-    cols = max(1, int(math.floor((hi[0] - x0) / r)) + 1)
-    rows = max(1, int(math.floor((hi[1] - y0) / r)) + 1)
-    if rows * cols > 400_000_000:  # :g: at -r 1e-300 the counts have ~300 digits
-        raise LidarfxError(f"DTM of {rows:g} x {cols:g} cells of {r:g} is too large; use a coarser resolution or tiles")
+    x0, y0, rows, cols = grid_layout(lo, hi, r, max_cells=MAX_CELLS, what="DTM")
     ytop = y0 + rows * r
     # local frame: origin at the south-west corner of the grid
     cx = (np.arange(cols) + 0.5) * r

@@ -188,9 +188,37 @@ def read(
         raise LidarfxError(f"{p}: {exc}") from exc
     except module.READ_ERRORS as exc:
         raise LidarfxError(f"cannot read {p}: {one_line(exc)}") from exc
+    cloud = finite_points(cloud, p)
     cloud.meta["source"] = str(p.resolve())
     cloud.meta["format"] = module.__name__.rsplit(".", 1)[-1]
     return cloud
+
+
+MAX_COORDINATE = 1e12
+"""Largest coordinate magnitude read (a billion kilometres, or millimetres of the whole Earth):
+beyond it a value is no survey coordinate, and its squares would overflow the analyses."""
+
+
+def finite_points(cloud: PointCloud, path: str | os.PathLike) -> PointCloud:
+    """The one rule for unusable coordinates, applied to every file read: points with a NaN or
+    infinite x, y or z, or one beyond :data:`MAX_COORDINATE` (PLY, text and NumPy files can hold
+    them; LAS/LAZ headers that could give them are refused, see
+    :func:`lidarfx.io.las.check_header`), are left out with one warning naming how many; a file
+    with points but none of them usable is an error."""
+    with np.errstate(invalid="ignore"):
+        ok = (np.abs(cloud.xyz) <= MAX_COORDINATE).all(axis=1)  # False for NaN too
+    bad = len(ok) - int(np.count_nonzero(ok))
+    if bad == 0:
+        return cloud
+    what = f"a NaN, infinite or out-of-range (beyond ±{MAX_COORDINATE:g}) x, y or z"
+    if bad == len(ok):
+        raise LidarfxError(f"{path}: no point has usable coordinates (all {bad} have {what})")
+    import warnings
+
+    from ..errors import LidarfxWarning
+
+    warnings.warn(f"{path}: {bad} of {len(ok)} points have {what} and are left out", LidarfxWarning, stacklevel=3)
+    return cloud.subset(ok)
 
 
 def write(
@@ -319,11 +347,13 @@ class _Summary:
             out.update(bounds=None, density=None)
         else:
             occupied = int(np.unique(np.concatenate(self.cells)).size)
-            dx, dy = (self.hi[:2] - self.lo[:2]) * self.unit_to_metre
+            with np.errstate(over="ignore", invalid="ignore"):  # extents beyond float64 squares: no area
+                dx, dy = (self.hi[:2] - self.lo[:2]) * self.unit_to_metre
+                area = float(dx * dy)
             out["bounds"] = {"min": self.lo.tolist(), "max": self.hi.tolist()}
             out["density"] = {
                 "per_m2_occupied_cells": self.n / (occupied * DENSITY_CELL_M**2),
-                "per_m2_bbox": self.n / (dx * dy) if dx * dy > 0 else None,
+                "per_m2_bbox": self.n / area if 0 < area < np.inf else None,
                 "occupied_cells": occupied,
                 "cell_size_m": DENSITY_CELL_M,
                 "measured": self._measured(),

@@ -142,6 +142,14 @@ def _narrow(name: str, values: np.ndarray, ints: dict[str, np.dtype]) -> np.ndar
     return values
 
 
+def _blank_whitespace(path: Path) -> Iterator[str]:
+    """The lines of ``path`` with whitespace-only lines made empty: ``numpy.loadtxt`` skips empty
+    lines, but with a ``,`` or ``;`` delimiter a line of spaces would be one empty field."""
+    with open(path, encoding="utf-8") as fh:
+        for line in fh:
+            yield line if line.strip() else "\n"
+
+
 def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
     """Read a text point cloud (see the module docstring for the rules)."""
     lines = _data_lines(path)
@@ -177,7 +185,7 @@ def read(path: Path, *, columns: list[str] | None = None, progress: bool | None 
         table = np.empty((0, len(use)))
     else:
         table = np.loadtxt(
-            path,
+            _blank_whitespace(path),
             delimiter=delimiter,
             comments="#",
             skiprows=skiprows,

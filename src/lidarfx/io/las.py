@@ -181,9 +181,191 @@ def _empty(n: int, fields: list[_Field]) -> tuple[np.ndarray, dict[str, np.ndarr
     return np.empty((n, 3), dtype=np.float64), {f.attr: np.empty(n, dtype=f.attr_dtype) for f in fields}
 
 
+# ------------------------------------------------------------ damaged files
+_VLR_HEADER = 54
+_EVLR_HEADER = 60
+_LAZ_VLR_FIXED = 34  # bytes of the laszip VLR before its item list (6 bytes per item)
+
+
+def _damaged(path: Path, what: str) -> LidarfxError:
+    return LidarfxError(f"{path}: damaged LAS/LAZ file: {what}")
+
+
+def check_structure(path: Path) -> None:
+    """The layout checks laspy does not make, from the file's own bytes and real size, before
+    laspy reads anything: where the point data start, how many VLRs and EVLRs fit, the laszip
+    VLR and the LAZ chunk table.  Every count read from the file is checked against the file's
+    size before anything is allocated or looped over by it; a one-line :class:`LidarfxError`."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(375)
+        if len(head) < 227 or head[:4] != b"LASF":
+            return  # laspy's own message names it (not a LAS file / too short)
+        minor = head[25]
+        header_size, offset, n_vlrs = struct.unpack_from("<HII", head, 94)
+        pf_byte, rec_len = struct.unpack_from("<BH", head, 104)
+        if offset > size:
+            raise _damaged(path, f"the point data start at byte {offset}, past the end of the file ({size} bytes)")
+        if header_size > offset:
+            raise _damaged(path, f"the header ({header_size} bytes) runs past the start of the point data ({offset})")
+        if n_vlrs * _VLR_HEADER > offset - header_size:
+            raise _damaged(path, f"{n_vlrs} VLRs cannot fit in the {offset - header_size} bytes before the point data")
+        vlrs, pos = [], header_size
+        for _ in range(n_vlrs):
+            fh.seek(pos)
+            raw = fh.read(_VLR_HEADER)
+            if len(raw) < _VLR_HEADER:
+                break
+            user, record, length = raw[2:18].split(b"\0")[0], *struct.unpack_from("<HH", raw, 18)
+            vlrs.append((user, record, pos + _VLR_HEADER, length))
+            pos += _VLR_HEADER + length
+        if minor >= 4 and len(head) >= 247:
+            start, count = struct.unpack_from("<QI", head, 235)
+            if count:
+                if start < offset or start + count * _EVLR_HEADER > size:
+                    raise _damaged(path, f"{count} EVLRs from byte {start} do not fit in the file ({size} bytes)")
+                pos = start
+                for _ in range(count):
+                    fh.seek(pos + 20)
+                    raw = fh.read(8)
+                    length = struct.unpack("<Q", raw)[0] if len(raw) == 8 else size
+                    pos += _EVLR_HEADER + length
+                    if pos > size:
+                        raise _damaged(path, f"an EVLR of {length} bytes runs past the end of the file")
+        if pf_byte & 0x80:
+            laz = next((v for v in vlrs if v[0] == b"laszip encoded" and v[1] == 22204), None)
+            if laz is not None:
+                count = struct.unpack_from("<I", head, 107)[0]
+                if minor >= 4 and len(head) >= 255:
+                    count = struct.unpack_from("<Q", head, 247)[0] or count
+                _check_laz(path, fh, laz, rec_len, offset, size, count)
+
+
+_VARIABLE_CHUNKS = 0xFFFFFFFF
+
+
+def _check_laz(path: Path, fh, vlr, rec_len: int, offset: int, size: int, count: int) -> None:
+    """The laszip VLR (chunk size, items) and the chunk table of a LAZ file: lazrs panics, or aborts
+    the process allocating the announced number of chunks, on broken ones."""
+    _, _, data_pos, length = vlr
+    fh.seek(data_pos)
+    data = fh.read(length)
+    if len(data) < _LAZ_VLR_FIXED:
+        raise _damaged(path, f"laszip VLR of {len(data)} bytes (at least {_LAZ_VLR_FIXED})")
+    chunk_size, = struct.unpack_from("<I", data, 12)
+    n_items, = struct.unpack_from("<H", data, 32)
+    if n_items == 0 or _LAZ_VLR_FIXED + 6 * n_items > len(data):
+        raise _damaged(path, f"laszip VLR lists {n_items} items in {len(data)} bytes")
+    item_bytes = sum(struct.unpack_from("<H", data, _LAZ_VLR_FIXED + 6 * i + 2)[0] for i in range(n_items))
+    if item_bytes != rec_len:
+        raise _damaged(path, f"laszip items of {item_bytes} bytes for point records of {rec_len} bytes")
+    compressor, = struct.unpack_from("<H", data, 0)
+    if compressor not in (2, 3):  # pointwise (1): no chunks, no chunk table
+        return
+    if chunk_size == 0:
+        raise _damaged(path, "laszip chunk size 0")
+    fh.seek(offset)
+    raw = fh.read(8)
+    if len(raw) < 8:
+        raise _damaged(path, "no LAZ chunk table offset")
+    (table,) = struct.unpack("<q", raw)
+    if table == -1:  # written by a writer that could not seek back: the offset is at the end
+        fh.seek(max(0, size - 8))
+        (table,) = struct.unpack("<q", fh.read(8).rjust(8, b"\0"))
+    if not offset + 8 <= table <= size - 8:
+        raise _damaged(path, f"LAZ chunk table at byte {table}, outside the point data (bytes {offset + 8} to {size})")
+    fh.seek(table)
+    _version, n_chunks = struct.unpack("<II", fh.read(8))
+    most = (table - offset - 8) // max(1, rec_len)  # every chunk starts with one raw point record
+    if n_chunks > most:
+        raise _damaged(path, f"the LAZ chunk table announces {n_chunks} chunks; at most {most} fit in the file")
+    if chunk_size != _VARIABLE_CHUNKS and count > n_chunks * chunk_size:
+        raise _damaged(path, f"the header announces {count} points; {n_chunks} LAZ chunks of {chunk_size} hold at "
+                             f"most {n_chunks * chunk_size}")
+
+
+def check_header(path: Path, header: LasHeader) -> None:
+    """The header facts every reader needs sound: a version 1.0 to 1.4; finite non-zero scales and
+    finite offsets that cannot give a coordinate beyond :data:`lidarfx.io.MAX_COORDINATE` (a LAS
+    file therefore never gives NaN, infinite or out-of-range coordinates); extra-bytes fields
+    with a name of their own and finite non-zero scales; a point format laspy can lay out; and,
+    uncompressed, a file long enough for the announced points (:func:`check_size`)."""
+    version = header.version
+    if version.major != 1 or version.minor > 4:
+        raise _damaged(path, f"LAS version {version.major}.{version.minor} (lidarfx reads 1.0 to 1.4)")
+    scales = np.asarray(header.scales, dtype=np.float64)
+    offsets = np.asarray(header.offsets, dtype=np.float64)
+    if not (np.isfinite(scales).all() and (scales != 0).all()):
+        raise _damaged(path, f"coordinate scales {scales.tolist()} (each must be a finite number other than 0)")
+    if not np.isfinite(offsets).all():
+        raise _damaged(path, f"coordinate offsets {offsets.tolist()} (each must be a finite number)")
+    from . import MAX_COORDINATE
+
+    with np.errstate(over="ignore"):
+        reach = np.abs(offsets) + np.abs(scales) * 2.0**31  # the farthest an int32 coordinate can go
+    if not (reach <= MAX_COORDINATE).all():
+        raise _damaged(path, f"scales {scales.tolist()} and offsets {offsets.tolist()} can give coordinates beyond "
+                             f"±{MAX_COORDINATE:g}")
+    names = [d.name for d in header.point_format.dimensions]
+    for dim in header.point_format.extra_dimensions:
+        if not dim.name.strip() or names.count(dim.name) > 1:
+            raise _damaged(path, f"extra-bytes field named {dim.name!r} (empty, or the name of another field)")
+        for what, values in (("scale", dim.scales), ("offset", dim.offsets)):
+            v = np.atleast_1d(np.asarray(values if values is not None else 1.0, dtype=np.float64))
+            if not np.isfinite(v).all() or (what == "scale" and (v == 0).any()):
+                raise _damaged(path, f"extra-bytes field {dim.name!r} has {what} {v.tolist()}")
+    try:
+        itemsize = header.point_format.dtype().itemsize
+    except Exception as exc:  # noqa: BLE001 - laspy's layout of hostile extra-bytes descriptors
+        raise _damaged(path, f"its extra-bytes descriptors describe no readable point record ({exc!r})") from None
+    if itemsize != header.point_format.size:
+        raise _damaged(path, f"point records of {header.point_format.size} bytes laid out in {itemsize}")
+    check_size(path, header)
+
+
+def _is_panic(exc: BaseException) -> bool:
+    """A Rust panic of lazrs (``pyo3_runtime.PanicException``, a BaseException)."""
+    return type(exc).__name__ == "PanicException"
+
+
+class _open:
+    """``laspy.open(path)`` after :func:`check_structure`, with :func:`check_header` passed; a
+    damaged file (laspy / lazrs errors, lazrs panics) as a one-line :class:`LidarfxError`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __enter__(self):
+        try:
+            check_structure(self.path)
+            self.reader = laspy.open(self.path)
+        except BaseException as exc:  # noqa: BLE001 - converted or re-raised by _convert
+            _convert(self.path, exc)
+            raise
+        try:
+            check_header(self.path, self.reader.header)
+        except BaseException:
+            self.reader.close()
+            raise
+        return self.reader
+
+    def __exit__(self, kind, exc, tb) -> None:
+        self.reader.close()
+        if exc is not None:
+            _convert(self.path, exc)
+
+
+def _convert(path: Path, exc: BaseException) -> None:
+    """Raise the one-line LidarfxError of a reading exception (returns for any other)."""
+    from . import one_line
+
+    if isinstance(exc, READ_ERRORS) or _is_panic(exc):
+        raise LidarfxError(f"cannot read {path}: {one_line(exc)}") from exc
+
+
 def read_header(path: Path) -> LasHeader:
     """The header (with VLRs and EVLRs) of a LAS/LAZ file, without its points."""
-    with laspy.open(path) as reader:
+    with _open(path) as reader:
         return reader.header
 
 
@@ -193,7 +375,7 @@ def iter_chunks(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[PointC
     Every chunk carries the file's header; a file without points yields one
     empty chunk (so the attribute names are still known).
     """
-    with laspy.open(path) as reader:
+    with _open(path) as reader:
         header = reader.header
         yielded = False
         for rec in reader.chunk_iterator(chunk_points):
@@ -230,40 +412,57 @@ def iter_records(path: Path, chunk_points: int = CHUNK_POINTS) -> Iterator[tuple
     Nothing is allocated from the header's point count; a file holding more or fewer points than
     its header announces, or a damaged one, is a one-line :class:`LidarfxError` (after the last
     chunk, for fewer points)."""
-    from . import one_line
-
-    try:
-        with laspy.open(path) as reader:
-            header = reader.header
-            n = int(header.point_count)
-            check_size(path, header)
-            done = 0
-            for rec in reader.chunk_iterator(chunk_points):
-                m = len(rec)
-                if done + m > n:
-                    raise LidarfxError(f"{path}: more points than the header's {n}")
-                yield done, rec, header
-                done += m
-    except READ_ERRORS as exc:
-        raise LidarfxError(f"cannot read {path}: {one_line(exc)}") from exc
+    with _open(path) as reader:
+        header = reader.header
+        n = int(header.point_count)
+        done = 0
+        for rec in reader.chunk_iterator(chunk_points):
+            m = len(rec)
+            if done + m > n:
+                raise LidarfxError(f"{path}: more points than the header's {n}")
+            yield done, rec, header
+            done += m
     if done != n:
         raise LidarfxError(f"{path}: header announces {n} points but the file holds {done} (truncated?)")
 
 
+def _capacity(path: Path, header: LasHeader) -> int:
+    """Points to allocate before reading: the header's count, checked against the file's size.
+    Uncompressed, :func:`check_size` has checked it; compressed, at most one point per
+    :data:`LAZ_MIN_POINT_BYTES` bytes of the file (more points are read into grown arrays)."""
+    n = int(header.point_count)
+    if not header.are_points_compressed:
+        return n
+    return min(n, max(CHUNK_POINTS, path.stat().st_size // LAZ_MIN_POINT_BYTES))
+
+
+LAZ_MIN_POINT_BYTES = 1
+"""Bytes of a LAZ file per point allocated ahead of reading (real LAZ files take 2 to 10)."""
+
+
+def _grow(xyz: np.ndarray, attrs: dict[str, np.ndarray], n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """``xyz`` and ``attrs`` resized to ``n`` points (in place where the allocator can)."""
+    xyz.resize((n, 3), refcheck=False)
+    for a in attrs.values():
+        a.resize(n, refcheck=False)
+    return xyz, attrs
+
+
 def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
     """Read a LAS/LAZ file into a :class:`PointCloud` (see the module docstring)."""
-    with laspy.open(path) as reader:
+    with _open(path) as reader:
         header = reader.header
         n = int(header.point_count)
-        check_size(path, header)
         fields = _fields(header.point_format)
-        xyz, attrs = _empty(n, fields)
+        xyz, attrs = _empty(_capacity(path, header), fields)
         done = 0
         with progress_bar(n, f"reading {path.name}", progress) as advance:
             for rec in reader.chunk_iterator(CHUNK_POINTS):
                 m = len(rec)
                 if done + m > n:
                     raise LidarfxError(f"{path}: more points than the header's {n}")
+                if done + m > len(xyz):
+                    xyz, attrs = _grow(xyz, attrs, min(n, max(done + m, 2 * len(xyz))))
                 sl = slice(done, done + m)
                 _decode(rec, header, fields, xyz[sl], {k: v[sl] for k, v in attrs.items()})
                 done += m
@@ -435,6 +634,10 @@ def _target_header(cloud: PointCloud, point_format: int | None, scale: Any) -> L
         unchanged = pf_id == source.point_format.id and not new_dims and len(kept) == len(
             list(source.point_format.extra_dimensions)
         )
+        wide = [d for d in kept if d.num_elements > 3] if not unchanged else []
+        if wide:  # e.g. unregistered extra bytes: an extra-bytes descriptor holds 1 to 3 elements
+            kept = [d for d in kept if d.num_elements <= 3]
+            new_dims += [_new_extra_dim(f.attr, cloud[f.attr]) for d in wide for f in _fields_of_dim(d)]
         version = _writable_version(header, pf_id)
         if unchanged:
             if version != str(header.version):
@@ -498,8 +701,14 @@ def _encoders(cloud: PointCloud, pf: PointFormat) -> list[_Encoder]:
                 info = np.iinfo(stored)
                 _check_fits(ends, stored, info.min, info.max, f"{what} (scaled)")
         else:
-            target = np.dtype(np.uint8) if f.dim.kind == _dims.DimensionKind.BitField else f.dim.dtype.base
-            lo, hi = (f.dim.min, f.dim.max) if target.kind in "iu" else (0, 0)
+            bits = f.dim.kind == _dims.DimensionKind.BitField
+            target = np.dtype(np.uint8) if bits else f.dim.dtype.base
+            if target.kind not in "iu":
+                lo, hi = 0, 0
+            elif bits:
+                lo, hi = f.dim.min, f.dim.max
+            else:  # one element's range (laspy's own min / max fail on arrays such as unregistered extra bytes)
+                lo, hi = np.iinfo(target).min, np.iinfo(target).max
             _check_fits(values, target, lo, hi, what)
         out.append(_Encoder(f, values))
     return out
@@ -608,6 +817,46 @@ class _ExtraBytesStats:
                         view[i] = v
 
 
+class _Recorded:
+    """A binary file that keeps the OSError of a failed write: the LAZ compressor (lazrs) reports
+    a full disk as "IoError: Failed to call write" without it."""
+
+    def __init__(self, fh) -> None:
+        self._fh = fh
+        self.error: OSError | None = None
+
+    def write(self, data) -> int:
+        try:
+            return self._fh.write(data)
+        except OSError as exc:
+            self.error = exc
+            raise
+
+    def __getattr__(self, name: str):
+        return getattr(self._fh, name)
+
+
+class _output_file:
+    """``open(path, "wb")`` for a LasWriter: a failed write (disk full, file too large) leaves as
+    its OSError, whatever the writer made of it."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __enter__(self) -> _Recorded:
+        self.fh = _Recorded(open(self.path, "wb"))
+        return self.fh
+
+    def __exit__(self, kind, exc, tb) -> None:
+        try:
+            self.fh.close()
+        except OSError:
+            if exc is None:
+                raise
+        if exc is not None and self.fh.error is not None and self.fh.error is not exc:
+            raise self.fh.error from exc
+
+
 def write(
     cloud: PointCloud,
     path: Path,
@@ -635,7 +884,7 @@ def write(
     stats = _ExtraBytesStats(header)
     buf = np.zeros(min(n, WRITE_CHUNK_POINTS), dtype=pf.dtype())
     compress = ext == ".laz"
-    with open(path, "wb") as fh, laspy.LasWriter(fh, header, do_compress=compress, closefd=False) as writer:
+    with _output_file(path) as fh, laspy.LasWriter(fh, header, do_compress=compress, closefd=False) as writer:
         stats.detach(writer.header)
         with progress_bar(n, f"writing {Path(path).name}", progress) as advance:
             for start in range(0, n, WRITE_CHUNK_POINTS):
@@ -667,7 +916,7 @@ def write_records(path: Path, header: LasHeader, chunks, *, ext: str = ".las") -
     stats = _ExtraBytesStats(out)
     extra = [f for f in _fields(pf) if not f.dim.is_standard]
     n = 0
-    with open(path, "wb") as fh, laspy.LasWriter(fh, out, do_compress=ext == ".laz", closefd=False) as writer:
+    with _output_file(path) as fh, laspy.LasWriter(fh, out, do_compress=ext == ".laz", closefd=False) as writer:
         stats.detach(writer.header)
         for rec in chunks:
             if not len(rec):

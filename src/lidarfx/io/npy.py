@@ -50,8 +50,51 @@ def _to_cloud(columns: dict[str, np.ndarray]) -> PointCloud:
     return PointCloud(xyz, columns)
 
 
+_DEFLATE_MAX_RATIO = 1032
+"""Most a deflated stream expands (zlib's own bound, about 1032:1)."""
+
+
+def _check_header(fh, what: str, available: int) -> None:
+    """The array header at ``fh`` against the ``available`` bytes: an array announced larger than
+    its data is refused before numpy allocates it."""
+    import math
+
+    version = np.lib.format.read_magic(fh)
+    start = fh.tell()
+    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    shape, _fortran, dtype = read_header(fh, max_header_size=10_000)
+    if dtype.hasobject:
+        raise LidarfxError(f"{what} holds Python objects; not loaded")
+    need = math.prod(shape) * dtype.itemsize
+    have = available - (fh.tell() - start) - 8  # the magic and version bytes
+    if need > have:
+        raise LidarfxError(f"{what}: the array header announces shape {shape} ({need} bytes) but {max(0, have)} "
+                           f"bytes of data follow (truncated or damaged file)")
+
+
+def check_sizes(path: Path) -> None:
+    """The ``.npy`` array or every ``.npz`` member against the bytes really there (for ``.npz`` the
+    member's size, itself checked against its compressed size), before anything is allocated."""
+    size = path.stat().st_size
+    if path.suffix.lower() != ".npz":
+        with open(path, "rb") as fh:
+            _check_header(fh, str(path), size)
+        return
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            stored = info.compress_type == zipfile.ZIP_STORED
+            if info.file_size > (info.compress_size if stored else info.compress_size * _DEFLATE_MAX_RATIO + 1024):
+                raise LidarfxError(f"{path}: member {info.filename} announces {info.file_size} bytes from "
+                                   f"{info.compress_size} stored (damaged archive)")
+            with zf.open(info) as fh:
+                _check_header(fh, f"{path}: member {info.filename}", info.file_size)
+
+
 def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
     """Read a ``.npy`` or ``.npz`` file (see the module docstring)."""
+    check_sizes(path)
     if path.suffix.lower() == ".npz":
         if columns is not None:
             raise LidarfxError("a column spec applies to .npy, not .npz (its arrays are named)")

@@ -44,16 +44,26 @@ ACCEPTS_COLUMNS = False
 READ_ERRORS = (PlyParseError, PlyHeaderParseError, PlyElementParseError, ValueError, EOFError, OSError, UnicodeDecodeError)
 
 _PLY_KINDS = {np.dtype(t) for t in ("i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8")}
+MAX_HEADER_BYTES = 1 << 16
+"""Longest PLY header read (real ones take a few hundred bytes; plyfile parses a header
+character by character, about 10 s per megabyte)."""
 
 
 def read(path: Path, *, columns: list[str] | None = None, progress: bool | None = None) -> PointCloud:
     """Read the vertices of a PLY file (see the module docstring)."""
     with open(path, "rb") as fh:
+        head = fh.read(MAX_HEADER_BYTES + 1)
+        if head.startswith(b"ply") and b"end_header" not in head and len(head) > MAX_HEADER_BYTES:
+            raise LidarfxError(f"{path}: no end_header in the first {MAX_HEADER_BYTES} bytes "
+                               f"(lidarfx reads PLY headers up to {MAX_HEADER_BYTES // 1024} KiB)")
+        fh.seek(0)
         parse_header = getattr(PlyData, "_parse_header", None)  # plyfile's own (checking) header parser
         header_only = parse_header is not None
         ply = parse_header(fh) if header_only else PlyData.read(fh)
         if not any(el.name == "vertex" for el in ply.elements):
             raise LidarfxError(f"{path}: PLY file has no 'vertex' element")
+        if header_only:
+            _check_counts(path, ply, path.stat().st_size - fh.tell())
         if header_only and ply.text and _scalar_only(ply["vertex"]):
             vertex = _read_text_vertices(fh, ply)
         else:
@@ -75,6 +85,25 @@ def read(path: Path, *, columns: list[str] | None = None, progress: bool | None 
             continue
         attrs[name] = np.ascontiguousarray(vertex[name], dtype=dt.newbyteorder("="))
     return PointCloud(xyz, attrs, meta={"ply_text": bool(ply.text), "ply_comments": list(ply.comments)})
+
+
+def _check_counts(path: Path, ply: PlyData, body: int) -> None:
+    """The header's element counts against the ``body`` bytes after it, before anything is
+    allocated by them: every element takes at least its scalar bytes and list counts (binary), or
+    two characters per property (text: a digit and a separator; a line break at least)."""
+    need = 0
+    for el in ply.elements:
+        if el.count < 0:
+            raise LidarfxError(f"{path}: PLY header announces {el.count} {el.name} elements")
+        if ply.text:
+            least = max(1, 2 * len(el.properties))  # a line per element
+        else:
+            least = sum(np.dtype(p.len_dtype if isinstance(p, PlyListProperty) else p.val_dtype).itemsize
+                        for p in el.properties)
+        need += el.count * least
+        if need > body:
+            raise LidarfxError(f"{path}: PLY header announces {el.count} {el.name} elements, more than the "
+                               f"{body} bytes after the header can hold (truncated or damaged file)")
 
 
 def _ply_dtype(name: str, values: np.ndarray) -> np.dtype:

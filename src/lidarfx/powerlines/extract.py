@@ -326,6 +326,28 @@ def _end_point(p: _Piece, high: bool) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ main
+def check_powerline_params(params: dict[str, Any]) -> dict[str, Any]:
+    """Every parameter check of :func:`extract_powerlines`, before any work: known names (of
+    :data:`DEFAULTS`), positive numbers, ``linearity`` in (0, 1), ``max_slope`` in (0, 90).
+    Returns :data:`DEFAULTS` updated with ``params``."""
+    unknown = sorted(set(params) - set(DEFAULTS))
+    if unknown:
+        raise LidarfxError(f"unknown power-line parameter(s): {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
+    p = {**DEFAULTS, **params}
+    for k, v in p.items():
+        try:
+            ok = math.isfinite(float(v)) and float(v) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise LidarfxError(f"{k} must be a positive number, got {v!r}")
+    if not 0 < p["linearity"] < 1:
+        raise LidarfxError(f"linearity must be between 0 and 1, got {p['linearity']!r}")
+    if not 0 < p["max_slope"] < 90:
+        raise LidarfxError(f"max_slope must be between 0 and 90 degrees, got {p['max_slope']!r}")
+    return p
+
+
 def extract_powerlines(
     cloud: PointCloud,
     *,
@@ -360,21 +382,9 @@ def extract_powerlines(
 
     if not isinstance(cloud, PointCloud):
         raise LidarfxError("extract_powerlines needs a PointCloud")
-    unknown = sorted(set(params) - set(DEFAULTS))
-    if unknown:
-        raise LidarfxError(f"unknown power-line parameter(s): {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
-    p = {**DEFAULTS, **params}
-    for k, v in p.items():
-        try:
-            ok = math.isfinite(float(v)) and float(v) > 0
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            raise LidarfxError(f"{k} must be a positive number, got {v!r}")
-    if not 0 < p["linearity"] < 1:
-        raise LidarfxError(f"linearity must be between 0 and 1, got {p['linearity']!r}")
-    if not 0 < p["max_slope"] < 90:
-        raise LidarfxError(f"max_slope must be between 0 and 90 degrees, got {p['max_slope']!r}")
+    p = check_powerline_params(params)
+    if "classification" in cloud:
+        _check_class_codes(cloud["classification"])
     unit = unit_to_metre(cloud)
     L = {k: float(p[k]) / unit for k in LENGTHS}
     min_points = max(5, int(p["min_points"]))
@@ -622,6 +632,24 @@ def extract_powerlines(
     return PowerLines(conductors, pylons, spans, out, meta, ground_world, xyz_w[obj])
 
 
+def _check_class_codes(values) -> None:
+    """The input's classification must be class codes (the output's classes are written into it):
+    a float column of a text file may hold anything."""
+    c = np.asarray(values)
+    if c.dtype.kind != "f":
+        return
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(c) & (c == np.round(c)) & (c >= 0) & (c <= 255)
+    if not ok.all():
+        raise LidarfxError(f"the classification attribute holds {int((~ok).sum())} values that are no class code "
+                           f"(a whole number 0 to 255), e.g. {c[~ok][0]:g}")
+
+
+MAX_GROUND_CELLS = 100_000_000
+"""Largest ground grid (cells, 10 km x 10 km at 1 m): a stray point far from the rest would
+otherwise ask for a grid of many gigabytes."""
+
+
 # ------------------------------------------------------------------ step 1
 def _ground_surface(xyz: np.ndarray, gmask: np.ndarray, cell: float):
     """The ground height at any plan position: the mean height of the ground points per
@@ -632,6 +660,10 @@ def _ground_surface(xyz: np.ndarray, gmask: np.ndarray, cell: float):
     lo = xyz[gmask, :2].min(axis=0)
     g = xyz[gmask]
     spec = GridSpec(g[:, :2] - lo, cell)
+    if spec.nx * spec.ny > MAX_GROUND_CELLS:
+        span = " x ".join(f"{v:,.0f}" for v in g[:, :2].max(axis=0) - lo)
+        raise LidarfxError(f"the ground points span {span} (file units): a ground grid of {spec.nx * spec.ny:,} cells "
+                           f"(at most {MAX_GROUND_CELLS:,}); crop the cloud or remove stray points far from the rest")
     i, j = cell_index(g[:, :2] - lo, spec)
     key = i * spec.nx + j
     cnt = np.bincount(key, minlength=spec.nx * spec.ny)

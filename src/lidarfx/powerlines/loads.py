@@ -42,6 +42,7 @@ AIR_DENSITY = 1.225
 
 
 def _items(text: str, what: str):
+    seen = set()
     for part in text.split(","):
         part = part.strip()
         if not part:
@@ -49,6 +50,9 @@ def _items(text: str, what: str):
         key, sep, value = part.partition("=")
         if not sep or not key.strip():
             raise LidarfxError(f"{what} item {part!r} is not key=value")
+        if key.strip().lower() in seen:
+            raise LidarfxError(f"{what} key {key.strip().lower()!r} given twice")
+        seen.add(key.strip().lower())
         yield key.strip().lower(), value.strip()
 
 

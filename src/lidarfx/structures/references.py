@@ -218,8 +218,8 @@ class References:
             raise LidarfxError(f"{p}: {size:,} bytes is too large for a references file (at most {MAX_FILE_BYTES:,})")
         try:
             doc = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise LidarfxError(f"{p}: not a JSON file ({' '.join(str(exc).split())})") from None
+        except (UnicodeDecodeError, ValueError, RecursionError) as exc:  # huge integers, deep nesting too
+            raise LidarfxError(f"{p}: not a JSON file ({' '.join(str(exc).split())[:200]})") from None
         return cls.from_json(doc, str(p))
 
 

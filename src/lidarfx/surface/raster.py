@@ -18,6 +18,7 @@ All files are written atomically (temporary file + rename).
 """
 from __future__ import annotations
 
+import math
 import os
 import struct
 from dataclasses import dataclass, field
@@ -30,10 +31,40 @@ from .._atomic import atomic_path
 from ..crs import prj_text as _prj_text
 from ..errors import LidarfxError
 
-__all__ = ["Raster", "RASTER_EXTENSIONS"]
+__all__ = ["Raster", "RASTER_EXTENSIONS", "grid_layout"]
 
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc")
 ASC_NODATA = -9999.0
+
+
+def grid_layout(lo: Any, hi: Any, resolution: float, *, max_cells: int,
+                what: str = "raster") -> tuple[float, float, int, int]:
+    """The cells of a raster product over ``lo`` = (xmin, ymin) .. ``hi`` = (xmax, ymax):
+    ``(x0, y0, rows, cols)``.
+
+    ``(x0, y0)``, the south-west corner, is snapped to multiples of ``resolution`` (adjacent tiles
+    line up); column ``j`` covers ``x0 + j·r <= x < x0 + (j + 1)·r`` and the rows likewise from
+    the south, so a point on a cell edge belongs to the cell east / north of it, and the extent's
+    east and north edges lie inside the last cells.  (The raster stores the rows north first.)
+    A layout of more than ``max_cells`` cells is refused before anything is allocated."""
+    r = float(resolution)
+    lo_x, lo_y, hi_x, hi_y = float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+    est = (max((hi_x - lo_x) / r, 1.0), max((hi_y - lo_y) / r, 1.0))  # at most (cols, rows), as floats
+    if not all(math.isfinite(v) for v in est) or est[0] * est[1] > max_cells:
+        rows, cols = (f"{math.ceil(v):g}" if math.isfinite(v) else "inf" for v in (est[1], est[0]))
+        raise LidarfxError(f"{what} of {rows} x {cols} cells of {r:g} is too large "
+                           f"(at most {max_cells:,} cells); use a coarser resolution or tiles")
+    if not (math.isfinite(lo_x / r) and math.isfinite(lo_y / r)):
+        raise LidarfxError(f"{what} cells of {r:g} are too small for coordinates of "
+                           f"{max(abs(lo_x), abs(lo_y)):g}; use a coarser resolution")
+    x0 = math.floor(lo_x / r) * r
+    y0 = math.floor(lo_y / r) * r
+    cols = max(1, int(math.floor((hi_x - x0) / r)) + 1)
+    rows = max(1, int(math.floor((hi_y - y0) / r)) + 1)
+    if rows * cols > max_cells:
+        raise LidarfxError(f"{what} of {rows:g} x {cols:g} cells of {r:g} is too large "
+                           f"(at most {max_cells:,} cells); use a coarser resolution or tiles")
+    return x0, y0, rows, cols
 
 
 @dataclass

@@ -143,10 +143,7 @@ def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outs
     dist, nn = tree.query(query)
     tri = None
     if len(xy) >= 3:
-        try:
-            tri = Delaunay(xy)
-        except (QhullError, ValueError):
-            tri = None
+        tri = _delaunay(xy)
     found = np.full(len(query), -1, dtype=np.int64)
     if tri is not None and len(tri.simplices):
         v2s = tri.vertex_to_simplex.astype(np.int64)
@@ -207,6 +204,32 @@ def _tin_one(xy: np.ndarray, values: np.ndarray, query: np.ndarray, nearest_outs
         miss = miss[_outside_hull(hull, query[miss])]  # outside all points: the nearest one decides
         ok[miss] = inside[miss]
     return out, ok, need
+
+
+_THIN_ROWS = 8.0
+"""A point set fewer than about this many mean spacings wide across its main axis is *thin*."""
+
+
+def _delaunay(xy: np.ndarray) -> Delaunay | None:
+    """The Delaunay triangulation of ``xy`` (n×2, n >= 3), None when Qhull finds none (collinear).
+
+    A thin set (a strip a few rows wide, e.g. 10 km of two scan rows 1 mm apart) makes Qhull's
+    default facet merging quadratic: minutes for 40 000 points.  Such a set is triangulated without
+    premerging (Qhull option ``Q0``: under a second), and with the default options only if that
+    fails on a precision problem."""
+    if len(xy) > 16:
+        c = xy - xy.mean(axis=0)
+        _, vec = np.linalg.eigh(c.T @ c)
+        width, length = np.ptp(c @ vec, axis=0)  # ascending eigenvalues: minor axis first
+        if np.isfinite(length) and len(xy) * width < _THIN_ROWS ** 2 * length:
+            try:
+                return Delaunay(xy, qhull_options="Qbb Qc Qz Q12 Q0")
+            except (QhullError, ValueError):
+                pass
+    try:
+        return Delaunay(xy)
+    except (QhullError, ValueError):
+        return None
 
 
 def _hull_of(xy: np.ndarray) -> tuple | None:

@@ -15,7 +15,9 @@ the work folder is removed.
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import os
 import shutil
 import time
@@ -25,9 +27,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import LidarfxError
+from ..errors import ENVIRONMENT_ERRNOS, LidarfxError
 from .catalog import Catalog, open_catalog
-from .plan import (Grid, check_grid, chunk_points_budget, default_chunk_size, default_workers)
+from .plan import (Grid, check_grid, chunk_name, chunk_points_budget, default_chunk_size, default_workers)
 
 MANIFEST_VERSION = 1
 
@@ -115,6 +117,9 @@ def process_chunk(work: str, name: str, spec: dict) -> dict:
     tmp.mkdir(parents=True)
     src_own = source[own]
     ids_own = ids[own]
+    if isinstance(result, tuple):  # a command that drops points: (the points kept, which of the owned ones)
+        result, kept = result
+        src_own, ids_own = src_own[kept], ids_own[kept]
     for k in np.unique(src_own):
         m = src_own == k
         io.write(result.subset(m), tmp / f"{int(k)}.las", progress=False)
@@ -130,13 +135,33 @@ def _manifest(cat: Catalog, command: str, options: dict, grid: Grid, per_tile: b
             "chunk_size": grid.size, "buffer": grid.buffer, "per_tile": per_tile, "ext": ext}
 
 
+def _read_split(work: Path, points: int) -> dict:
+    """``WORK/split/split.json`` of a resumed run, checked to be what :func:`split_inputs` writes:
+    data only, chunk names ``c<i>_<j>`` of their own indices (no path leaves the work folder)."""
+    path = work / "split" / "split.json"
+    try:
+        split = json.loads(path.read_text())
+        chunks = split["chunks"]
+        ok = (type(split) is dict and type(chunks) is list and type(split["points"]) is int and split["points"] == points
+              and all(len(split[k]) == 3 and all(type(v) in (int, float) and math.isfinite(v) for v in split[k])
+                      for k in ("mins", "maxs")))
+        for c in chunks:
+            ok = ok and type(c) is dict and all(type(c[k]) is int for k in ("i", "j", "points", "buffered"))
+            ok = ok and c["name"] == chunk_name(c["i"], c["j"]) and 0 <= c["points"] <= c["buffered"] <= points
+    except (ValueError, TypeError, KeyError, OSError, RecursionError):
+        ok = False
+    if not ok:
+        raise LidarfxError(f"{path} is damaged or was not written by lidarfx; run without --resume to start again")
+    return split
+
+
 def _prepare_work(work: Path, manifest: dict, resume: bool) -> bool:
     """Create (or check, with ``resume``) the work folder; True when a split can be reused."""
     mpath = work / "manifest.json"
     if resume and mpath.exists():
         try:
             old = json.loads(mpath.read_text())
-        except ValueError:
+        except (ValueError, RecursionError):  # not JSON, a huge integer, nested too deeply: not this run's
             old = None
         if old != json.loads(json.dumps(manifest)):
             raise LidarfxError(f"{work} holds a run with other inputs or options; run without --resume to start again")
@@ -174,6 +199,9 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
                         break
                     except LidarfxError as exc:
                         raise LidarfxError(f"{what} {name}: {exc}") from exc
+                    except OSError as exc:
+                        if exc.errno in ENVIRONMENT_ERRNOS or attempt == retries:  # a full disk stays full
+                            _raise_failure(exc, what, name, retries)
                     except Exception as exc:
                         if attempt == retries:
                             raise LidarfxError(f"{what} {name} failed {retries + 1} times: "
@@ -213,8 +241,10 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
                             g.cancel()
                         if isinstance(exc, LidarfxError):
                             raise LidarfxError(f"{what} {names[f.key]}: {exc}")
+                        if isinstance(exc, OSError):
+                            _raise_failure(exc, what, names[f.key], retries)
                         raise LidarfxError(f"{what} {names[f.key]} failed {retries + 1} times: "
-                                           f"{type(exc).__name__}: {exc}")
+                                           f"{type(exc).__name__}: {exc}") from exc
                     results.append(f.result())
                     advance(1)
         finally:
@@ -223,6 +253,25 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
         if cluster is not None:
             cluster.close()
     return results
+
+
+@contextlib.contextmanager
+def _naming(work: Path):
+    """A disk-full (and alike) OSError that names no file names the work folder."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno in ENVIRONMENT_ERRNOS and not exc.filename:
+            raise OSError(exc.errno, exc.strerror or os.strerror(exc.errno), str(work)) from exc
+        raise
+
+
+def _raise_failure(exc: OSError, what: str, name: str, retries: int) -> None:
+    """A disk-full (and alike) error as it is (lidarfx: one line naming the file, exit 1);
+    other OS errors as the task's one-line failure."""
+    if exc.errno in ENVIRONMENT_ERRNOS:
+        raise exc
+    raise LidarfxError(f"{what} {name} failed {retries + 1} times: {type(exc).__name__}: {exc}") from exc
 
 
 MERGE_WINDOW = 2_000_000
@@ -358,8 +407,11 @@ def run_tiled(
     out = Path(output)
     per_tile = out.suffix.lower() not in (".las", ".laz")
     if per_tile:
+        from .._atomic import check_new_folder
+
         if out.exists() and not out.is_dir():
             raise LidarfxError(f"{out} is not a folder; give a .las / .laz output file or a folder")
+        check_new_folder(out)  # without overwriting (lidarfx without --force): new or empty
         if not out.parent.is_dir() and str(out.parent) not in ("", "."):
             raise LidarfxError(f"output folder's parent does not exist: {out.parent}")
         ext = ""
@@ -391,27 +443,28 @@ def run_tiled(
     grid = check_grid(float(chunk_size), buf, cat.mins, cat.maxs)
     work = Path(work_dir) if work_dir is not None else out.with_name(out.name + ".lidarfx-work")
     manifest = _manifest(cat, command, options, grid, per_tile, ext)
-    have_split = _prepare_work(work, manifest, resume)
-    if have_split:
-        split = json.loads((work / "split" / "split.json").read_text())
-    else:
-        from ..progress import bar, wanted
+    with _naming(work):  # a full disk in the work folder says so (its files are kept for --resume)
+        have_split = _prepare_work(work, manifest, resume)
+        if have_split:
+            split = _read_split(work, cat.points)
+        else:
+            from ..progress import bar, wanted
 
-        if (work / "split").exists():
-            shutil.rmtree(work / "split")
-        with bar("splitting", cat.points, wanted(progress)) as advance:
-            split = split_inputs(cat, grid, work, advance)
-    t1 = time.perf_counter()
-    chunks = split["chunks"]
-    done = {p.stem for p in (work / "done").glob("*.json")}
-    todo = [c for c in chunks if c["name"] not in done or not (work / "out" / c["name"]).is_dir()]
-    threads = max(1, default_workers() // n_workers) if scheduler is None else 0
-    spec = {"command": command, "options": options, "mins": split["mins"], "maxs": split["maxs"],
-            "points": split["points"], "chunk_size": grid.size, "buffer": grid.buffer, "threads": threads,
-            "sources": len(cat.sources), "chunks": {c["name"]: (c["i"], c["j"]) for c in todo}}
-    n_exec = min(n_workers, max(1, len(todo)))
-    execute([(c["name"], process_chunk, (str(work), c["name"], spec)) for c in todo],
-            workers=n_exec, scheduler=scheduler, progress=progress)
+            if (work / "split").exists():
+                shutil.rmtree(work / "split")
+            with bar("splitting", cat.points, wanted(progress)) as advance:
+                split = split_inputs(cat, grid, work, advance)
+        t1 = time.perf_counter()
+        chunks = split["chunks"]
+        done = {p.stem for p in (work / "done").glob("*.json")}
+        todo = [c for c in chunks if c["name"] not in done or not (work / "out" / c["name"]).is_dir()]
+        threads = max(1, default_workers() // n_workers) if scheduler is None else 0
+        spec = {"command": command, "options": options, "mins": split["mins"], "maxs": split["maxs"],
+                "points": split["points"], "chunk_size": grid.size, "buffer": grid.buffer, "threads": threads,
+                "sources": len(cat.sources), "chunks": {c["name"]: (c["i"], c["j"]) for c in todo}}
+        n_exec = min(n_workers, max(1, len(todo)))
+        execute([(c["name"], process_chunk, (str(work), c["name"], spec)) for c in todo],
+                workers=n_exec, scheduler=scheduler, progress=progress)
     t2 = time.perf_counter()
     outputs = _merge(work, chunks, cat, out, per_tile, ext, progress, n_workers, scheduler)
     t3 = time.perf_counter()
@@ -434,7 +487,10 @@ def _merge(work: Path, chunks: list[dict], cat: Catalog, out: Path, per_tile: bo
         return [p for c in chunks for k in ks for p in [work / "out" / c["name"] / f"{k}.las"] if p.exists()]
 
     if not per_tile:
-        execute([(out.name, _merge_ordered, (parts_of(range(len(cat.sources))), out, ext, 0, cat.points))],
+        parts = parts_of(range(len(cat.sources)))
+        if not parts:  # every point was dropped (crop, filter): nothing to write, the caller decides
+            return []
+        execute([(out.name, _merge_ordered, (parts, out, ext, 0, cat.points))],
                 workers=1, scheduler=None, progress=progress, what="merge")
         return [str(out)]
     out.mkdir(exist_ok=True)

@@ -141,7 +141,8 @@ PROCESSORS: dict[str, Processor] = {
 """Commands that run in chunks, by name (those of other modules are added by :func:`get`)."""
 
 _MODULES = {"ground": "proc_ground", "eigenclass": "proc_classes", "classify": "proc_classes",
-            "colour": "proc_colour"}
+            "colour": "proc_colour", "crop": "proc_ops", "filter": "proc_ops", "outliers-stats": "proc_ops",
+            "reproject": "proc_ops"}
 
 
 def get(command: str) -> Processor:
