@@ -125,12 +125,15 @@ def test_ascii_hard_values_read_back_bit_for_bit(tmp_path, monkeypatch):
     write(cloud, tmp_path / "a.ply", ascii=True)
     binary, text = read(tmp_path / "b.ply"), read(tmp_path / "a.ply")
     vertex = PlyData.read(str(tmp_path / "a.ply"))["vertex"].data
-    assert _same(text.xyz, cloud.xyz) and _same(binary.xyz, cloud.xyz)
+    # the readers leave out points with non-finite or out-of-range coordinates (docs/io.md), the
+    # same ones from either file; the file itself holds every value exactly (plyfile below)
+    finite = np.isfinite(cloud.xyz).all(axis=1) & (np.abs(cloud.xyz) <= 1e12).all(axis=1)
+    assert _same(text.xyz, cloud.xyz[finite]) and _same(binary.xyz, cloud.xyz[finite])
     for i, c in enumerate("xyz"):
         assert _same(vertex[c].astype("<f8"), cloud.xyz[:, i]), c
     for name in binary.names:
         assert _same(text[name], binary[name]), name
-        assert _same(vertex[name].astype(binary[name].dtype), binary[name]), name
+        assert _same(vertex[name][finite].astype(binary[name].dtype), binary[name]), name
     body = (tmp_path / "a.ply").read_text().split("end_header\n")[1].split("\n")
     assert [line.split()[0] for line in body[:6]] == ["nan", "inf", "-inf", "-0", "0", "5e-324"] and body[-1] == ""
 
