@@ -770,3 +770,26 @@ def test_unregistered_extra_bytes_are_written_and_read_back(damaged_sources, tmp
         assert sorted(back.names) == sorted(cloud.names)
         for n in cloud.names:
             np.testing.assert_array_equal(back[n], cloud[n])
+
+
+def test_the_report_encodes_an_attribute_spanning_the_doubles():
+    """Random point bytes give gps_time values from -1e308 to 1e308: their span overflowed."""
+    from lidarfx.report._encode import encode_attribute
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        spec, codes = encode_attribute("gps_time", np.array([-1.7e308, 0.0, 1.7e308, np.nan, 5.0]))
+    assert codes.tolist() == [0, 32767, 65534, 65535, 32767] and np.isfinite(spec["scale"])
+
+
+def test_the_ground_filter_refuses_a_grid_of_gigabytes_for_a_few_points():
+    """LAS records read one byte off (offset to the point data - 1) scatter 2,000 points over
+    7 x 30 km: SMRF's 1.5 m grid asked for 99 million cells, several gigabytes."""
+    from lidarfx.ground import classify_ground
+
+    rng = np.random.default_rng(0)
+    xyz = np.column_stack([rng.uniform(0, 7400, 2000), rng.uniform(0, 30200, 2000), rng.uniform(0, 4000, 2000)])
+    with pytest.raises(LidarfxError, match="more than 1,000 per point"):
+        classify_ground(PointCloud(xyz))
+    dense = np.column_stack([rng.uniform(0, 60, 5000), rng.uniform(0, 60, 5000), rng.normal(0, 0.05, 5000)])
+    assert classify_ground(PointCloud(np.vstack([dense, [[3000.0, 3000.0, 0.0]]]))).sum() > 4000  # one stray point

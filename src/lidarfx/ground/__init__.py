@@ -45,6 +45,10 @@ IGNORE_CLASSES: tuple[int, ...] = (7, 18, 66)
 GROUND_CLASS = 2
 NON_GROUND_CLASS = 1
 MAX_CELLS = 400_000_000
+MAX_CELLS_PER_POINT = 1000
+"""Most grid cells per candidate point (beyond a million cells): real surveys have about one point
+per cell, and a corridor across its bounding box a hundred cells per point; thousands mean a few
+points scattered over kilometres (stray points, a damaged file) and a grid of gigabytes."""
 
 
 def _xyz_attrs(cloud: Any) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -193,6 +197,11 @@ def classify_ground(
         raise LidarfxError(
             f"the cloud spans {ext[0]:g} x {ext[1]:g} m: {cells:.3g} cells of {cell:g} m is too many; "
             "cut it into tiles or use a larger cell"
+        )
+    if cells > MAX_CELLS_PER_POINT * len(idx) + 1_000_000:  # a grid of gigabytes for a few points
+        raise LidarfxError(
+            f"the {len(idx):,} points spread over {ext[0]:g} x {ext[1]:g} m: {cells:.3g} cells of {cell:g} m, "
+            f"more than {MAX_CELLS_PER_POINT:,} per point; crop the cloud or remove stray points far from the rest"
         )
     spec = GridSpec(local[:, :2], cell)
     radius = window_radius(window, cell, spec.nx, spec.ny)

@@ -646,8 +646,8 @@ def _check_class_codes(values) -> None:
 
 
 MAX_GROUND_CELLS = 100_000_000
-"""Largest ground grid (cells, 10 km x 10 km at 1 m): a stray point far from the rest would
-otherwise ask for a grid of many gigabytes."""
+"""Largest ground grid (cells, 10 km x 10 km at 1 m), and at most 1,000 cells per ground point
+beyond a million: a stray point far from the rest would otherwise ask for a grid of gigabytes."""
 
 
 # ------------------------------------------------------------------ step 1
@@ -660,7 +660,7 @@ def _ground_surface(xyz: np.ndarray, gmask: np.ndarray, cell: float):
     lo = xyz[gmask, :2].min(axis=0)
     g = xyz[gmask]
     spec = GridSpec(g[:, :2] - lo, cell)
-    if spec.nx * spec.ny > MAX_GROUND_CELLS:
+    if spec.nx * spec.ny > min(MAX_GROUND_CELLS, 1000 * len(g) + 1_000_000):  # cf. ground.MAX_CELLS_PER_POINT
         span = " x ".join(f"{v:,.0f}" for v in g[:, :2].max(axis=0) - lo)
         raise LidarfxError(f"the ground points span {span} (file units): a ground grid of {spec.nx * spec.ny:,} cells "
                            f"(at most {MAX_GROUND_CELLS:,}); crop the cloud or remove stray points far from the rest")

@@ -100,9 +100,13 @@ def encode_attribute(name: str, values: np.ndarray, labels: Mapping[int, str] | 
                                                                                          CATEGORICAL_MAX)
     else:
         scale = span / U16_STEPS if span > 0 else (abs(vmin) or 1.0) / U16_STEPS
+        if not np.isfinite(scale):  # values from -1e308 to 1e308: the span overflows, its steps do not
+            scale = vmax / U16_STEPS - vmin / U16_STEPS
         codes = np.full(n, 65535, dtype=np.uint16)
         if fv.size:
-            q = np.clip(np.rint((fv - vmin) / scale), 0, U16_STEPS).astype(np.uint16)
+            with np.errstate(over="ignore"):
+                steps = (fv - vmin) / scale if np.isfinite(span) else fv / scale - vmin / scale
+            q = np.clip(np.rint(steps), 0, U16_STEPS).astype(np.uint16)
             if finite is None:
                 codes[:] = q
             else:
