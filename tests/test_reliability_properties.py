@@ -148,7 +148,8 @@ def _reference_las(data: bytes):
     offset, = struct.unpack_from("<I", data, 96)
     rec_len, = struct.unpack_from("<H", data, 105)
     count, = struct.unpack_from("<I", data, 107)
-    if minor >= 4:
+    header_size, = struct.unpack_from("<H", data, 94)
+    if minor >= 4 and header_size >= 375:  # a shorter header has no 1.4 fields, whatever its version
         count, = struct.unpack_from("<Q", data, 247)
     scales = np.array(struct.unpack_from("<3d", data, 131))
     offsets = np.array(struct.unpack_from("<3d", data, 155))
@@ -792,4 +793,4 @@ def test_the_ground_filter_refuses_a_grid_of_gigabytes_for_a_few_points():
     with pytest.raises(LidarfxError, match="more than 1,000 per point"):
         classify_ground(PointCloud(xyz))
     dense = np.column_stack([rng.uniform(0, 60, 5000), rng.uniform(0, 60, 5000), rng.normal(0, 0.05, 5000)])
-    assert classify_ground(PointCloud(np.vstack([dense, [[3000.0, 3000.0, 0.0]]]))).sum() > 4000  # one stray point
+    assert classify_ground(PointCloud(np.vstack([dense, [[1000.0, 1000.0, 0.0]]]))).sum() > 4000  # one stray point

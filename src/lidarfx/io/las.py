@@ -208,6 +208,8 @@ def check_structure(path: Path) -> None:
             raise _damaged(path, f"the point data start at byte {offset}, past the end of the file ({size} bytes)")
         if header_size > offset:
             raise _damaged(path, f"the header ({header_size} bytes) runs past the start of the point data ({offset})")
+        if minor >= 4 and header_size < 375:
+            raise _damaged(path, f"a LAS 1.{minor} header of {header_size} bytes (LAS 1.4 headers have 375)")
         if n_vlrs * _VLR_HEADER > offset - header_size:
             raise _damaged(path, f"{n_vlrs} VLRs cannot fit in the {offset - header_size} bytes before the point data")
         vlrs, pos = [], header_size
