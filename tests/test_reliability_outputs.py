@@ -285,6 +285,21 @@ def test_temporary_files_of_killed_runs_are_removed_by_the_next_write(tmp_path):
 
 
 # --------------------------------------------------------------------------- SIGKILL
+def test_sigterm_stops_a_run_and_removes_its_temporary_file(scenes, tmp_path):
+    """SIGTERM (kill PID, a batch system's time limit) while the output is being written: exit code
+    143, one line, no output and no temporary file left."""
+    out = tmp_path / "out.laz"
+    proc = lidarfx_process(["features", str(scenes / "big.laz"), str(out), "-r", "1", "-f", "eigen,plane,msac", "-q"])
+    mine = f"-{proc.pid}-"
+    while not any(mine in t.name for t in temporaries(tmp_path)) and proc.poll() is None:
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert err.strip() == "lidarfx: terminated"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_killed_run_leaves_its_output_complete_or_absent(scenes, tmp_path):
     src = scenes / "big.laz"
     ref = tmp_path / "ref.laz"

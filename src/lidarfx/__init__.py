@@ -10,6 +10,7 @@ from . import _numba_cache, _prebuilt
 _numba_cache.check()
 _prebuilt.install()
 
+from ._atomic import overwriting  # noqa: E402
 from .cloud import PointCloud  # noqa: E402
 from .errors import LidarfxError  # noqa: E402
 from .io import read, write  # noqa: E402
@@ -31,6 +32,7 @@ __all__ = [
     "detect_small_parts",
     "vectorise_members",
     "Pipeline",
+    "overwriting",
     "__version__",
 ]
 

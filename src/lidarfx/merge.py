@@ -424,7 +424,9 @@ def merge_files(inputs: Sequence[str | os.PathLike] | str | os.PathLike, output:
     from .io import las
 
     t0 = time.perf_counter()
-    paths = _expand(inputs)
+    from .tiles.catalog import expand_inputs
+
+    paths = expand_inputs(inputs, any_format=True, none="nothing to merge: no input")
     dst = Path(output)
     for p in paths:
         io.input_format(p)
@@ -475,29 +477,6 @@ def merge_files(inputs: Sequence[str | os.PathLike] | str | os.PathLike, output:
     if written != sum(counts):
         raise LidarfxError("an input changed while it was read")
     return _summary(paths, dst, counts, plan.warnings, plan.summary(), "streamed", time.perf_counter() - t0)
-
-
-def _expand(inputs) -> list[Path]:
-    items = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
-    if not items:
-        raise LidarfxError("nothing to merge: no input")
-    out: list[Path] = []
-    for item in items:
-        p = Path(item)
-        if p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in (".las", ".laz"))
-            if not found:
-                raise LidarfxError(f"{p}: no .las / .laz files in this folder")
-            out += found
-        else:
-            out.append(p)
-    seen: set[str] = set()
-    for p in out:
-        k = os.path.realpath(p)
-        if k in seen:
-            raise LidarfxError(f"{p} is given twice")
-        seen.add(k)
-    return out
 
 
 def _summary(paths, dst, counts, warns, plan_summary, mode, seconds) -> dict[str, Any]:

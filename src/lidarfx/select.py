@@ -110,8 +110,23 @@ def _tokenize(expr: str) -> list[_Tok]:
     return toks
 
 
+SHOWN = 80
+"""Longest expression an error message repeats whole; a longer one is shown around the problem."""
+
+
+def shown_expression(expr: str, pos: int | None = None) -> str:
+    """``expr`` for an error message: whole (quoted) up to :data:`SHOWN` characters, else the
+    characters around column ``pos + 1`` (the start without ``pos``) with "..." for the rest."""
+    if len(expr) <= SHOWN:
+        return repr(expr)
+    half = SHOWN // 2
+    a = max(0, min(len(expr) - SHOWN, (pos or 0) - half))
+    b = a + SHOWN
+    return ("..." if a else "") + repr(expr[a:b]) + ("..." if b < len(expr) else "") + f" ({len(expr):,} characters)"
+
+
 def _error(expr: str, pos: int, msg: str) -> LidarfxError:
-    return LidarfxError(f"invalid expression at column {pos + 1}: {msg} (in {expr!r})")
+    return LidarfxError(f"invalid expression at column {pos + 1}: {msg} (in {shown_expression(expr, pos)})")
 
 
 # ----------------------------------------------------------------------------
@@ -409,7 +424,7 @@ class _Evaluator:
         self.cache: dict[str, np.ndarray] = {}
 
     def fail(self, msg: str) -> LidarfxError:
-        return LidarfxError(f"invalid expression: {msg} (in {self.expr.source!r})")
+        return LidarfxError(f"invalid expression: {msg} (in {shown_expression(self.expr.source)})")
 
     def lookup(self, name: str, pos: int) -> np.ndarray:
         if name in self.cache:
@@ -525,7 +540,7 @@ def evaluate(cloud: PointCloud, expr: str | Expression) -> np.ndarray:
         try:
             res = ev.condition(e.tree)
         except (OverflowError, ZeroDivisionError, ValueError, TypeError) as exc:
-            raise LidarfxError(f"cannot evaluate {e.source!r}: {exc}") from None
+            raise LidarfxError(f"cannot evaluate {shown_expression(e.source)}: {exc}") from None
     res = np.asarray(res, dtype=bool)
     if res.ndim == 0:
         res = np.full(len(cloud), bool(res))

@@ -84,6 +84,29 @@ def _add_force(sub) -> None:
             p.add_argument("--force", action="store_true", default=argparse.SUPPRESS, help=FORCE_HELP)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM during a run: raised where Python code runs next, so that temporary outputs are
+    removed as after Ctrl-C (exit code 143)."""
+
+
+def _catch_sigterm():
+    """Turn SIGTERM into :class:`Terminated` for the run (main thread only); the previous handler,
+    or None when it could not be set."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def _raise(signum, frame):
+        raise Terminated()
+
+    try:
+        return signal.signal(signal.SIGTERM, _raise)
+    except (ValueError, OSError):
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     from ._args import join_number_lists
 
@@ -109,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     _numba_cache.announce_compiles()
     # the run replaces existing outputs only with --force (the Python API always does)
     token = OVERWRITE.set(bool(getattr(args, "force", False)))
+    previous = _catch_sigterm()
     try:
         rc = args.func(args)
     except LidarfxError as exc:
@@ -126,10 +150,17 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, MemoryError) as exc:  # the machine stopped the run: disk full, out of memory, ...
         print(f"lidarfx: error: {failure_line(exc)}", file=sys.stderr)
         return EXIT_FAILURE
+    except Terminated:
+        print("lidarfx: terminated", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print("lidarfx: interrupted", file=sys.stderr)
         return 130
     finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous)
         OVERWRITE.reset(token)
         warnings.showwarning = _default_show
     return int(rc or 0)

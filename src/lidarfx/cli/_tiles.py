@@ -1,7 +1,6 @@
 """The chunking options every per-point command shares, and the switch to a chunked run."""
 from __future__ import annotations
 
-import glob
 import sys
 from pathlib import Path
 
@@ -32,15 +31,11 @@ def add_tile_options(p) -> None:
 
 
 def inputs_of(text: str) -> list[str] | str:
-    """A file or folder as given; a pattern with * ? [ expanded (sorted), or a one-line error."""
-    from ..errors import LidarfxError
+    """A file or folder as given; a pattern with * ? [ expanded (sorted), or a one-line error
+    (:func:`lidarfx.tiles.catalog.inputs_of`)."""
+    from ..tiles.catalog import inputs_of as expand
 
-    if any(c in text for c in "*?[") and not Path(text).exists():
-        found = sorted(glob.glob(text))
-        if not found:
-            raise LidarfxError(f"no file matches {text}")
-        return found
-    return text
+    return expand(text)
 
 
 def wants_tiles(args, command: str, by_size: bool = True) -> bool:

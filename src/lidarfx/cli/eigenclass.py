@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._args import add_columns, check_picture_path, emit_summary, read_input
+from ._args import add_columns, check_output, check_picture_path, emit_summary, read_input
 from ._tiles import TILE_HELP, add_tile_options, inputs_of, run_tiles, wants_tiles
 from ._report import ReportJob, add_report_option
 
@@ -113,6 +113,9 @@ def run(args) -> int:
     from ..structures import check_min_neighbours, check_reject
     from ..structures.references import resolve_references
 
+    tiled = wants_tiles(args, "eigenclass", by_size=args.radius is not None)  # checks a chunked run's output
+    if not tiled:
+        check_output(args.input, args.output)  # outputs are checked before anything else
     if args.picture:
         check_picture_path(args.picture)
     report = ReportJob(args)
@@ -120,7 +123,7 @@ def run(args) -> int:
     check_min_neighbours(args.min_neighbours)
     refs, kind = resolve_references(args.references)  # a bad file is refused before reading the cloud
     refs.tables(kind, args.weighting)
-    if wants_tiles(args, "eigenclass", by_size=args.radius is not None):
+    if tiled:
         from ..errors import LidarfxError
         from ..tiles.proc_classes import eigenclass_options
 

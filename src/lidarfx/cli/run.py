@@ -8,6 +8,8 @@ EPILOG = """examples:
   lidarfx run pipeline.json                        # validate everything, then run the steps
   lidarfx run pipeline.json --dry-run              # validate and print the plan; nothing is written
   lidarfx run pipeline.json --input a.laz --output a_out.laz --json   # the same pipeline on another file
+  lidarfx run pipeline.json --chunk-size 250       # in chunks on Dask: cloud steps fused per chunk
+  lidarfx run pipeline.json --input tiles/ --output out/ --workers 4   # a folder of tiles, one output per tile
   lidarfx run --steps                              # the steps and their keys
 
 pipeline.json:
@@ -24,7 +26,9 @@ command's long options (edge-step or edge_step), lengths are metres as
 everywhere.  The whole file is checked before the first step runs: every step,
 key and value, the inputs, and the outputs (format, folder, not an input, not
 existing unless --force); nothing in it is executed as code.  Steps run in
-memory, one after the other, on the same cloud.  docs/pipelines.md.
+memory, one after the other, on the same cloud; with a chunk option (or a
+folder of tiles, or an input larger than memory) the cloud steps between the
+read and the one write run fused per chunk on Dask.  docs/pipelines.md.
 """
 
 
@@ -47,6 +51,9 @@ def register(sub) -> None:
     p.add_argument("--markdown", action="store_true", help="with --steps: the reference of docs/pipelines.md")
     p.add_argument("--json", action="store_true", help="print the summary (or, with --dry-run, the plan) as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines or bars")
+    from ._tiles import add_tile_options
+
+    add_tile_options(p)
     p.set_defaults(func=run)
 
 
@@ -73,19 +80,23 @@ def run(args) -> int:
     if not args.pipeline:
         raise LidarfxError("run needs a pipeline file (see lidarfx run --help)")
     pipe = Pipeline.from_json(args.pipeline, input=args.input, output=args.output)
+    chunked = _chunked(args, pipe)
     if args.dry_run:
-        pipe.check()
+        pipe.check(chunked=chunked)
         if args.json:
             _json.dump({"pipeline": args.pipeline, "valid": True, "steps": pipe.plan()}, sys.stdout, indent=2)
             print()
         else:
-            print(f"{args.pipeline}: {len(pipe.steps)} steps, valid (dry run: nothing run, nothing written)")
+            print(f"{args.pipeline}: {len(pipe.steps)} steps, valid{' in chunks' if chunked else ''} "
+                  "(dry run: nothing run, nothing written)")
             print(pipe.plan_text())
         return 0
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
+    if chunked:
+        return _run_chunked(args, pipe, log)
     pipe.run(progress=False if args.quiet else None, log=None if args.quiet else log)
     summary = pipe.summary
     if args.json:
@@ -94,4 +105,53 @@ def run(args) -> int:
     elif not args.quiet:
         print(f"{summary['points']:,} points, {len(summary['steps'])} steps in {summary['seconds']:.2f} s -> "
               f"{', '.join(summary['outputs'])}", file=sys.stderr)
+    return 0
+
+
+def _chunked(args, pipe) -> bool:
+    """In chunks: a chunk option given, the input a folder or several files, the output a folder,
+    or (a pipeline that can run in chunks) an input larger than one chunk may hold."""
+    from pathlib import Path
+
+    from ..errors import LidarfxError
+
+    if args.chunk_size == 0:
+        if args.resume or args.scheduler:
+            raise LidarfxError("--chunk-size 0 runs in memory; --resume and --scheduler need chunks")
+        return False
+    if any(v is not None for v in (args.chunk_size, args.scheduler, args.buffer, args.workers, args.work_dir)) \
+            or args.resume:
+        return True
+    if pipe.steps[0][0].kind != "read" or pipe.steps[-1][0].kind != "write":
+        return False
+    src, out = pipe.steps[0][1]["path"], pipe.steps[-1][1]["path"]
+    if any(c in src for c in "*?[") and not Path(src).exists() or Path(src).is_dir() or not Path(out).suffix:
+        return True
+    if Path(src).suffix.lower() not in (".las", ".laz") or not Path(src).is_file() or pipe.chunk_problem():
+        return False
+    from ..tiles import open_catalog
+    from ..tiles.plan import chunk_points_budget, default_workers
+
+    return open_catalog(src).points > chunk_points_budget(default_workers())
+
+
+def _run_chunked(args, pipe, log) -> int:
+    from .. import _json
+
+    summary = pipe.run_chunked(chunk_size=args.chunk_size, buffer=args.buffer, workers=args.workers,
+                               scheduler=args.scheduler, resume=args.resume, work_dir=args.work_dir,
+                               progress=False if args.quiet else None, log=None if args.quiet else log)
+    if args.json:
+        _json.dump(summary, sys.stdout, indent=2)
+        print()
+    elif not args.quiet:
+        n = len(summary["steps"])
+        for r in summary["steps"]:
+            extra = (f", {r['ground_points']:,} ground" if "ground_points" in r else "") + \
+                (", " + ", ".join(f"class {c} {k:,}" for c, k in r["classes"].items()) if r.get("classes") else "")
+            log(f"[{r['step']}/{n + 2}] {r['type']}: {r['points']:,} points{extra}")
+        c = summary["chunks"]
+        log(f"{summary['points']:,} of {summary['points_read']:,} points, {n} steps in {c['chunks']} chunks of "
+            f"{c['chunk_size']:g} m (buffer {c['buffer']:g} m, {c['workers']} workers) in {summary['seconds']:.2f} s "
+            f"-> {', '.join(summary['outputs'][:3])}{' ...' if len(summary['outputs']) > 3 else ''}")
     return 0

@@ -286,14 +286,23 @@ class Pipeline:
         """``(step, path)`` of every file the pipeline reads."""
         return [(i, p) for i, (s, o) in enumerate(self.steps, 1) for p in s.input_paths(o)]
 
-    def check(self, cloud_given: bool = False) -> list[Any]:
+    def check(self, cloud_given: bool = False, *, chunked: bool = False) -> list[Any]:
         """The checks that touch files, before any work: the input files exist and can be read
         (models and references are loaded), and every output has a known format, an existing
         folder, is no input, is written once and (unless overwriting is allowed,
-        :data:`lidarfx._atomic.OVERWRITE`) does not exist.  Returns what the steps loaded."""
+        :data:`lidarfx._atomic.OVERWRITE`) does not exist.  Returns what the steps loaded.
+        ``chunked``: the checks of :meth:`run_chunked` (the read path may be a folder of tiles or
+        a pattern, the write path a folder; steps a chunk cannot run are refused)."""
         from .. import io
         from .._atomic import check_new_folder, check_output_folder
 
+        if chunked:
+            from .chunked import check_chunkable
+
+            try:
+                check_chunkable(self)
+            except LidarfxError as exc:
+                raise LidarfxError(f"{self.name}: {exc}") from None
         if cloud_given and self.steps[0][0].kind == "read":
             raise LidarfxError(f"{self.name}: give run() a cloud or start with a read step, not both")
         if not cloud_given:
@@ -305,7 +314,14 @@ class Pipeline:
         ins = self.inputs()
         for i, p in ins:
             try:
-                if self.steps[i - 1][0].kind == "read":
+                if self.steps[i - 1][0].kind == "read" and chunked:
+                    from ..tiles import open_catalog
+                    from ..tiles.catalog import inputs_of
+
+                    if self.steps[0][1]["columns"]:
+                        raise LidarfxError("in chunks the input is LAS / LAZ; a column spec does not apply")
+                    open_catalog(inputs_of(p))  # LAS / LAZ files, a folder of tiles or a pattern
+                elif self.steps[i - 1][0].kind == "read":
                     if self.steps[0][1]["columns"] and not io.accepts_columns(p):
                         raise LidarfxError(f"{p}: a column spec applies only to text and .npy files")
                     io.input_format(p)
@@ -322,15 +338,20 @@ class Pipeline:
                 for j, q in seen:
                     if _same(p, q):
                         raise LidarfxError(f"output {p} is written by step {j} too; give each output its own path")
-                if what == "cloud":
-                    io.check_output_path(p)
-                elif what == "folder":
+                if what == "folder" or (what == "cloud" and chunked and not Path(p).suffix):
+                    # a product's folder, or in chunks one output file per input tile
                     out = Path(p)
                     if out.exists() and not out.is_dir():
                         raise LidarfxError(f"{out} exists and is not a folder")
                     if not out.parent.is_dir() and str(out.parent) not in ("", "."):
                         raise LidarfxError(f"output folder's parent does not exist: {out.parent}")
                     check_new_folder(out)
+                elif what == "cloud":
+                    io.check_output_path(p)
+                    if chunked:
+                        from .._atomic import check_new_file
+
+                        check_new_file(Path(p))
                 else:
                     check_output_folder(p)
             except LidarfxError as exc:
@@ -343,6 +364,36 @@ class Pipeline:
             except LidarfxError as exc:
                 raise LidarfxError(f"{where(i)}: {exc}") from None
         return prepared
+
+    def run_chunked(self, *, chunk_size: float | None = None, buffer: float | None = None,
+                    workers: int | None = None, scheduler: str | None = None, resume: bool = False,
+                    work_dir: str | os.PathLike | None = None, progress: bool | None = None,
+                    log: Callable[[str], None] | None = None) -> dict:
+        """Run the pipeline chunk by chunk on Dask (docs/pipelines.md "In chunks"): the cloud steps
+        fused into one task per chunk, the chunks merged into the write step's file (or folder, one
+        file per input tile).  Options as :func:`lidarfx.tiles.run_tiled` takes them (metres).
+        Steps a chunk cannot run as the whole cloud does are refused first, with the step named.
+        Returns the summary (also in :attr:`summary`)."""
+        from .chunked import run_chunked
+
+        self.check(chunked=True)
+        try:
+            self.summary = run_chunked(self, chunk_size=chunk_size, buffer=buffer, workers=workers,
+                                       scheduler=scheduler, resume=resume, work_dir=work_dir, progress=progress,
+                                       log=log)
+        except LidarfxError as exc:
+            raise LidarfxError(f"{self.name}: {exc}") from exc
+        return self.summary
+
+    def chunk_problem(self) -> str | None:
+        """Why the pipeline cannot run in chunks (the one-line reason), or None when it can."""
+        from .chunked import check_chunkable
+
+        try:
+            check_chunkable(self)
+        except LidarfxError as exc:
+            return str(exc)
+        return None
 
     # ------------------------------------------------------------------ plan and run
     def plan(self) -> list[dict]:

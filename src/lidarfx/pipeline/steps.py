@@ -103,6 +103,11 @@ def write_options(o: dict) -> dict:
 
     from .. import io
 
+    if not Path(o["path"]).suffix:  # a folder (one file per input tile) in chunks; in memory Pipeline.check refuses it
+        given = [k for k in WRITE_OPTIONS if o.get(k) is not None]
+        if given:
+            raise LidarfxError(f"{given[0]} is not an option of a folder output")
+        return {}
     module = io._format_module(Path(o["path"]))
     allowed = [n for n, p in inspect.signature(module.write).parameters.items()
                if p.kind is inspect.Parameter.KEYWORD_ONLY and n not in ("ext", "progress", "fill")]

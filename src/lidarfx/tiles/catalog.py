@@ -14,6 +14,18 @@ from ..errors import LidarfxError
 SUFFIXES = (".las", ".laz")
 
 
+def inputs_of(text: str) -> list[str] | str:
+    """A file or folder as given; a pattern with * ? [ expanded (sorted), or a one-line error."""
+    import glob
+
+    if any(c in text for c in "*?[") and not Path(text).exists():
+        found = sorted(glob.glob(text))
+        if not found:
+            raise LidarfxError(f"no file matches {text}")
+        return found
+    return text
+
+
 @dataclass
 class Source:
     """One input file: its path, points (from the header, checked against the file), the bounds
@@ -59,13 +71,15 @@ class Catalog:
         return h.hexdigest()[:16]
 
 
-def expand_inputs(inputs: str | os.PathLike | Sequence[str | os.PathLike]) -> list[Path]:
+def expand_inputs(inputs: str | os.PathLike | Sequence[str | os.PathLike], *, any_format: bool = False,
+                  none: str = "no input given") -> list[Path]:
     """Files of ``inputs``: a file, a folder (its ``*.las`` / ``*.laz``, sorted by name; COPC
     files are LAZ) or a list of those.  One-line errors for a missing path, an empty folder,
-    a file that is not LAS/LAZ or a file given twice."""
+    a file that is not LAS/LAZ (``any_format``: files of any format pass, for the caller to
+    check) or a file given twice; ``none``: the message for no input."""
     items = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
     if not items:
-        raise LidarfxError("no input given")
+        raise LidarfxError(none)
     out: list[Path] = []
     for item in items:
         p = Path(item)
@@ -74,6 +88,8 @@ def expand_inputs(inputs: str | os.PathLike | Sequence[str | os.PathLike]) -> li
             if not found:
                 raise LidarfxError(f"{p}: no .las / .laz files in this folder")
             out += found
+        elif any_format:
+            out.append(p)
         elif p.is_file():
             if p.suffix.lower() not in SUFFIXES:
                 raise LidarfxError(f"{p}: tiled runs read LAS / LAZ files (convert it first: lidarfx convert)")

@@ -49,14 +49,26 @@ class Context:
 
 @dataclass
 class Chunk:
-    """One chunk's buffered cloud: ``own`` marks the points it owns (it writes those only),
-    ``ids`` their global index (source order), ``source`` the input file of each point."""
+    """One chunk's buffered cloud: ``own`` marks the points whose results the processor returns
+    (the points of the chunk's square, or more in a fused pipeline), ``ids`` their global index
+    (source order), ``source`` the input file of each point, ``cell`` the chunk's grid square
+    ``(i, j)``."""
 
     name: str
     cloud: Any
     own: np.ndarray
     ids: np.ndarray
     source: np.ndarray
+    cell: tuple[int, int] | None = None
+
+    def square(self, ctx: "Context", q: np.ndarray) -> tuple[float, float, float, float]:
+        """The bounds of the chunk's square (``cell``; else the square of the first of ``q``)."""
+        if self.cell is not None:
+            return ctx.grid.bounds(int(self.cell[0]), int(self.cell[1]))
+        if not len(q):
+            return (0.0, 0.0, 0.0, 0.0)
+        i, j = ctx.grid.cells(q[:1, 0], q[:1, 1])
+        return ctx.grid.bounds(int(i[0]), int(j[0]))
 
 
 @dataclass
@@ -73,6 +85,8 @@ class TileRun:
     scheduler: str
     seconds: dict[str, float] = field(default_factory=dict)
     largest_chunk: int = 0
+    chunk_infos: list[dict] = field(default_factory=list)
+    """Every chunk's ``done`` record (points, seconds, and what its processor added)."""
 
     def as_dict(self) -> dict:
         return {"outputs": self.outputs, "chunks": self.chunks, "chunks_resumed": self.resumed,
@@ -107,7 +121,8 @@ def process_chunk(work: str, name: str, spec: dict) -> dict:
     i, j = spec["chunks"][name]
     ci, cj = ctx.grid.cells(cloud.x, cloud.y)
     own = (ci == i) & (cj == j)
-    result = get(spec["command"]).process(Chunk(name, cloud, own, ids, source), ctx, spec["options"])
+    result = get(spec["command"]).process(Chunk(name, cloud, own, ids, source, (int(i), int(j))), ctx,
+                                          spec["options"])
     out = w / "out" / name
     if out.exists():
         shutil.rmtree(out)
@@ -120,12 +135,14 @@ def process_chunk(work: str, name: str, spec: dict) -> dict:
     if isinstance(result, tuple):  # a command that drops points: (the points kept, which of the owned ones)
         result, kept = result
         src_own, ids_own = src_own[kept], ids_own[kept]
+    extra = result.meta.pop("chunk_info", None) or {}  # counts a processor reports (JSON data)
     for k in np.unique(src_own):
         m = src_own == k
         io.write(result.subset(m), tmp / f"{int(k)}.las", progress=False)
         ids_own[m].tofile(tmp / f"{int(k)}.ids")
     os.replace(tmp, out)
-    info = {"name": name, "points": int(own.sum()), "buffered": len(cloud), "seconds": round(time.perf_counter() - t0, 3)}
+    info = {**extra, "name": name, "points": int(own.sum()), "buffered": len(cloud),
+            "seconds": round(time.perf_counter() - t0, 3)}
     _write_json(w / "done" / f"{name}.json", info)
     return info
 
@@ -213,12 +230,12 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
     from distributed import Client, LocalCluster, as_completed
 
     for noisy in ("distributed", "distributed.worker", "distributed.nanny", "distributed.scheduler"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+        logging.getLogger(noisy).setLevel(logging.CRITICAL)  # a failed chunk is one lidarfx line
     cluster = None
     try:
         if scheduler is None:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=0,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=":0", silence_logs=logging.CRITICAL)
             client = Client(cluster)
         else:
             try:
@@ -468,6 +485,12 @@ def run_tiled(
     t2 = time.perf_counter()
     outputs = _merge(work, chunks, cat, out, per_tile, ext, progress, n_workers, scheduler)
     t3 = time.perf_counter()
+    infos = []
+    for c in chunks:
+        try:
+            infos.append(json.loads((work / "done" / f"{c['name']}.json").read_text()))
+        except (OSError, ValueError):
+            pass
     if not keep_work:
         shutil.rmtree(work, ignore_errors=True)
     return TileRun(outputs=outputs, chunks=len(chunks), resumed=len(chunks) - len(todo), points=cat.points,
@@ -475,7 +498,7 @@ def run_tiled(
                    workers=n_exec,
                    scheduler=scheduler or ("embedded LocalCluster" if n_exec > 1 else "this process"),
                    seconds={"split": round(t1 - t0, 3), "chunks": round(t2 - t1, 3), "merge": round(t3 - t2, 3)},
-                   largest_chunk=max((c["buffered"] for c in chunks), default=0))
+                   largest_chunk=max((c["buffered"] for c in chunks), default=0), chunk_infos=infos)
 
 
 def _merge(work: Path, chunks: list[dict], cat: Catalog, out: Path, per_tile: bool, ext: str,

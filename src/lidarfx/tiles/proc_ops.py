@@ -90,10 +90,11 @@ def check_filter_options(o: dict) -> None:
                   o.get("action", "classify"), o.get("class", 7))
 
 
-def _mean_distances(chunk, ctx, o: dict) -> tuple[np.ndarray, float | None]:
+def _mean_distances(chunk, ctx, o: dict, with_reach: bool = False):
     """The mean distance of every owned point to its k nearest other points (the whole cloud's
     index origin), and None when the buffer holds every k-th neighbour, else the buffer (m) that
-    does (an upper bound: a neighbour missing beyond the buffer is nearer than the one found)."""
+    does (an upper bound: a neighbour missing beyond the buffer is nearer than the one found).
+    ``with_reach``: also every owned point's distance to its k-th neighbour (coordinate units)."""
     from ..neighbors import NeighborIndex
     from ..outliers import knn_cell
 
@@ -102,11 +103,11 @@ def _mean_distances(chunk, ctx, o: dict) -> tuple[np.ndarray, float | None]:
     b = ctx.grid.buffer
     q = cloud.xyz[own]
     if len(cloud) <= k:  # fewer points than a neighbourhood, buffer included
-        return np.full(len(q), np.inf), max(2.0 * b, b + 1.0) * unit_of(o)
+        far = np.full(len(q), np.inf)
+        return (far, max(2.0 * b, b + 1.0) * unit_of(o)) + ((far,) if with_reach else ())
     index = NeighborIndex(cloud.xyz, knn_cell(cloud.xyz, k + 1), np.asarray(ctx.mins, dtype=np.float64))
     _, dist = index.knn(q, k + 1)
-    i, j = ctx.grid.cells(q[:, 0], q[:, 1])
-    bx0, by0, bx1, by1 = ctx.grid.bounds(int(i[0]), int(j[0])) if len(q) else (0, 0, 0, 0)
+    bx0, by0, bx1, by1 = chunk.square(ctx, q)
     lo, hi = np.asarray(ctx.mins, dtype=np.float64), np.asarray(ctx.maxs, dtype=np.float64)
     # a side whose buffered edge lies beyond the data misses no neighbour
     sides = [(q[:, 0] - (bx0 - b), bx0 - b < lo[0]), ((bx1 + b) - q[:, 0], bx1 + b > hi[0]),
@@ -115,7 +116,7 @@ def _mean_distances(chunk, ctx, o: dict) -> tuple[np.ndarray, float | None]:
     reach = dist[:, -1]
     bad = reach > room
     need = float((reach[bad] - room[bad]).max() + b) * unit_of(o) if bad.any() else None
-    return dist[:, 1:].sum(axis=1) / k, need
+    return (dist[:, 1:].sum(axis=1) / k, need) + ((reach,) if with_reach else ())
 
 
 def _reach_error(k: int, need: float) -> LidarfxError:
@@ -127,12 +128,13 @@ def stats_process(chunk, ctx, o: dict):
     the buffer the chunk needs, written to ``stats_dir/<chunk>.json``; no point is written."""
     from ..outliers import moments
 
-    d, need = _mean_distances(chunk, ctx, o)
+    d, need, reach = _mean_distances(chunk, ctx, o, with_reach=True)
     n, s1, s2 = moments(d) if need is None else (len(d), 0, 0)
     folder = Path(o["stats_dir"])
     folder.mkdir(parents=True, exist_ok=True)
     tmp = folder / f".{chunk.name}.tmp"
-    tmp.write_text(json.dumps({"n": n, "s1": str(s1), "s2": str(s2), "need": need}))
+    tmp.write_text(json.dumps({"n": n, "s1": str(s1), "s2": str(s2), "need": need,
+                               "reach": None if need is not None else float(reach.max(initial=0.0)) * unit_of(o)}))
     tmp.replace(folder / f"{chunk.name}.json")
     none = np.zeros(int(chunk.own.sum()), dtype=bool)
     sub = chunk.cloud.subset(chunk.own)
@@ -182,8 +184,30 @@ def reproject_process(chunk, ctx, o: dict):
     return PointCloud(xyz, sub.attrs, header=header)
 
 
+# --------------------------------------------------------------------------- select
+def check_select_options(o: dict) -> None:
+    from ..select import parse
+
+    if not isinstance(o.get("where"), str):
+        raise LidarfxError("select options need 'where', an expression")
+    parse(o["where"])
+
+
+def select_process(chunk, ctx, o: dict):
+    """The owned points where the expression holds (not, with ``invert``): per point, no buffer."""
+    from ..select import evaluate, parse
+
+    sub = chunk.cloud.subset(chunk.own)
+    sub.meta.pop("source", None)
+    mask = np.asarray(evaluate(sub, parse(o["where"])), dtype=bool)
+    if o.get("invert"):
+        mask = ~mask
+    return sub.subset(mask), mask
+
+
 PROCESSORS = {
     "crop": Processor(crop_buffer, crop_process, check_crop_options, metres=True),
+    "select": Processor(crop_buffer, select_process, check_select_options),
     "filter": Processor(filter_buffer, filter_process, check_filter_options, metres=True),
     "outliers-stats": Processor(filter_buffer, stats_process, check_filter_options, metres=True),
     "reproject": Processor(crop_buffer, reproject_process),
@@ -292,12 +316,55 @@ def reproject_options(inputs, to, *, source=None, scale=None, ballpark: bool = F
             "source_label": crs_label(src), "target_label": crs_label(dst)}
 
 
-def _write_empty(path: Path, header) -> None:
+def write_empty(path: Path, header) -> None:
     from .._atomic import atomic_path
     from ..io.las import write_records
 
     with atomic_path(path) as tmp:
         write_records(tmp, header, [], ext=path.suffix.lower())
+
+
+def statistical_threshold(inputs, output, options: dict, *, work_dir=None, kw: dict) -> tuple[dict, dict]:
+    """The first pass of the statistical filter in chunks (command ``outliers-stats``): ``options``
+    with the whole cloud's ``threshold``, and the facts (mean distance, sigma, threshold, a widened
+    buffer).  ``kw``: run_tiled's chunk keywords; its ``buffer`` is widened (in place) when the
+    default buffer does not hold every k-th neighbour."""
+    from ..outliers import threshold
+    from . import run_tiled
+
+    t0 = time.perf_counter()
+    out = Path(output)
+    extra: dict[str, Any] = {}
+    buffer = kw.get("buffer")
+    base = Path(work_dir) if work_dir is not None else out.with_name(out.name + ".lidarfx-work")
+    stats_dir = base.with_name(base.name + "-stats.d")
+    for attempt in range(3):  # the default buffer grows to what the k-th neighbours reach
+        shutil.rmtree(stats_dir, ignore_errors=True)
+        try:
+            first = run_tiled(inputs, output, "outliers-stats", {**options, "stats_dir": str(stats_dir)},
+                              work_dir=base.with_name(base.name + "-stats"), **kw)
+            n, s1, s2, need, far = 0, Fraction(0), Fraction(0), None, 0.0
+            for f in sorted(stats_dir.glob("*.json")):
+                d = json.loads(f.read_text())
+                n, s1, s2 = n + d["n"], s1 + Fraction(d["s1"]), s2 + Fraction(d["s2"])
+                if d.get("need") is not None:
+                    need = max(need or 0.0, float(d["need"]))
+                elif d.get("reach") is not None:
+                    far = max(far, float(d["reach"]))
+        finally:
+            shutil.rmtree(stats_dir, ignore_errors=True)
+        if need is None:
+            break
+        if buffer is not None or attempt == 2:  # the user's buffer is kept: say what it takes
+            raise _reach_error(int(options["k"]), need)
+        kw["buffer"] = float(f"{math.ceil(need * 1.05 * 100) / 100:.6g}")
+        extra["buffer_widened_m"] = kw["buffer"]
+    if n != first.points:
+        raise LidarfxError(f"the statistics pass saw {n} of {first.points} points; start again")
+    mu, sigma, thr = threshold(n, s1, s2, options["std"])
+    extra.update({"mean_distance": mu, "sigma": sigma, "threshold": thr, "neighbour_reach_m": far,
+                  "seconds_statistics": round(time.perf_counter() - t0, 3)})
+    return {**options, "threshold": thr}, extra
 
 
 def run_ops(inputs, output, command: str, options: dict, *, allow_empty: bool = True, empty_message: str = "",
@@ -317,35 +384,8 @@ def run_ops(inputs, output, command: str, options: dict, *, allow_empty: bool = 
     kw = dict(chunk_size=chunk_size, buffer=buffer, workers=workers, scheduler=scheduler, progress=progress)
     extra: dict[str, Any] = {}
     if command == "filter" and options["method"] == "statistical":
-        from ..outliers import threshold
-
-        base = Path(work_dir) if work_dir is not None else out.with_name(out.name + ".lidarfx-work")
-        stats_dir = base.with_name(base.name + "-stats.d")
-        for attempt in range(3):  # the default buffer grows to what the k-th neighbours reach
-            shutil.rmtree(stats_dir, ignore_errors=True)
-            try:
-                first = run_tiled(inputs, output, "outliers-stats", {**options, "stats_dir": str(stats_dir)},
-                                  work_dir=base.with_name(base.name + "-stats"), **kw)
-                n, s1, s2, need = 0, Fraction(0), Fraction(0), None
-                for f in sorted(stats_dir.glob("*.json")):
-                    d = json.loads(f.read_text())
-                    n, s1, s2 = n + d["n"], s1 + Fraction(d["s1"]), s2 + Fraction(d["s2"])
-                    if d.get("need") is not None:
-                        need = max(need or 0.0, float(d["need"]))
-            finally:
-                shutil.rmtree(stats_dir, ignore_errors=True)
-            if need is None:
-                break
-            if buffer is not None or attempt == 2:  # the user's buffer is kept: say what it takes
-                raise _reach_error(int(options["k"]), need)
-            kw["buffer"] = float(f"{math.ceil(need * 1.05 * 100) / 100:.6g}")
-            extra["buffer_widened_m"] = kw["buffer"]
-        if n != first.points:
-            raise LidarfxError(f"the statistics pass saw {n} of {first.points} points; start again")
-        mu, sigma, thr = threshold(n, s1, s2, options["std"])
-        options = {**options, "threshold": thr}
-        extra.update({"mean_distance": mu, "sigma": sigma, "threshold": thr,
-                      "seconds_statistics": round(time.perf_counter() - t0, 3)})
+        options, facts = statistical_threshold(inputs, output, options, work_dir=work_dir, kw=kw)
+        extra.update(facts)
     res = run_tiled(inputs, output, command, options, resume=resume, work_dir=work_dir, **kw)
     outputs = [Path(p) for p in res.outputs]
     sources = expand_inputs(inputs)
@@ -356,10 +396,10 @@ def run_ops(inputs, output, command: str, options: dict, *, allow_empty: bool = 
         empty = [s for s in sources if s.name not in done]
         if empty and allow_empty:
             for s in empty:
-                _write_empty(out / s.name, read_header(s))
+                write_empty(out / s.name, read_header(s))
                 outputs.append(out / s.name)
     elif not outputs and allow_empty:
-        _write_empty(out, read_header(sources[0]))
+        write_empty(out, read_header(sources[0]))
         outputs = [out]
     if not outputs:
         if per_tile and not existed and out.is_dir() and not any(out.iterdir()):

@@ -122,8 +122,7 @@ def features_process(chunk, ctx, o: dict):
 def _check_knn_reach(chunk, ctx, index, q: np.ndarray, k: int, unit: float = 1.0) -> None:
     """Every owned point's k-th neighbour must lie within the buffer: else a one-line error
     with the buffer needed."""
-    i, j = ctx.grid.cells(q[:, 0], q[:, 1])
-    bx0, by0, bx1, by1 = ctx.grid.bounds(int(i[0]), int(j[0]))
+    bx0, by0, bx1, by1 = chunk.square(ctx, q)
     room = np.minimum.reduce([q[:, 0] - (bx0 - ctx.grid.buffer), (bx1 + ctx.grid.buffer) - q[:, 0],
                               q[:, 1] - (by0 - ctx.grid.buffer), (by1 + ctx.grid.buffer) - q[:, 1]])
     kk = min(k, len(chunk.cloud))
@@ -142,7 +141,7 @@ PROCESSORS: dict[str, Processor] = {
 
 _MODULES = {"ground": "proc_ground", "eigenclass": "proc_classes", "classify": "proc_classes",
             "colour": "proc_colour", "crop": "proc_ops", "filter": "proc_ops", "outliers-stats": "proc_ops",
-            "reproject": "proc_ops"}
+            "reproject": "proc_ops", "select": "proc_ops", "pipeline": "proc_pipeline"}
 
 
 def get(command: str) -> Processor:
