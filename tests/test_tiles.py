@@ -161,6 +161,17 @@ def test_on_a_dask_cluster(scene, tmp_path, run_cli):
         with pytest.raises(LidarfxError, match=r"chunk c1_2 failed 2 times: RuntimeError: disk on fire"):
             execute([("c1_2", boom, ("c1_2",))], workers=2, scheduler=cl.scheduler_address, progress=False)
 
+        tries = tmp_path / "tries"
+
+        def wrong(name):  # a wrong option fails the same way again: not retried
+            with open(tries, "a") as fh:
+                fh.write(name + "\n")
+            raise LidarfxError("the 8 nearest neighbours reach 3.00 m beyond the chunk; give --buffer 3")
+
+        with pytest.raises(LidarfxError, match=r"^chunk c0_1: the 8 nearest neighbours .* give --buffer 3$"):
+            execute([("c0_1", wrong, ("c0_1",))], workers=2, scheduler=cl.scheduler_address, progress=False)
+        assert tries.read_text() == "c0_1\n"
+
 
 def test_a_failed_chunk_is_retried_then_named(tmp_path):
     marker = tmp_path / "tried"

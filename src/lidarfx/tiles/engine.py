@@ -194,6 +194,22 @@ def _prepare_work(work: Path, manifest: dict, resume: bool) -> bool:
     return False
 
 
+@dataclass
+class TaskError:
+    """A task's one-line :class:`LidarfxError`, returned instead of raised: a wrong option or input
+    fails the same way again, so Dask does not retry it (retries are for lost workers)."""
+
+    message: str
+
+
+def run_task(fn: Callable, *args: Any) -> Any:
+    """``fn(*args)`` on a worker, its :class:`LidarfxError` as a :class:`TaskError`."""
+    try:
+        return fn(*args)
+    except LidarfxError as exc:
+        return TaskError(str(exc))
+
+
 def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler: str | None,
             progress: bool | None, retries: int = 1, what: str = "chunk") -> list[Any]:
     """Run ``tasks`` (name, function, arguments) on Dask: an embedded ``LocalCluster`` of
@@ -246,8 +262,8 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
             names = {}
             futures = []
             for name, fn, args in tasks:
-                f = client.submit(fn, *args, key=f"lidarfx-{name}-{os.getpid()}-{time.time_ns()}", retries=retries,
-                                  pure=False)
+                f = client.submit(run_task, fn, *args, key=f"lidarfx-{name}-{os.getpid()}-{time.time_ns()}",
+                                  retries=retries, pure=False)
                 names[f.key] = name
                 futures.append(f)
             with bar(what + "s", len(tasks), show) as advance:
@@ -262,7 +278,12 @@ def execute(tasks: list[tuple[str, Callable, tuple]], *, workers: int, scheduler
                             _raise_failure(exc, what, names[f.key], retries)
                         raise LidarfxError(f"{what} {names[f.key]} failed {retries + 1} times: "
                                            f"{type(exc).__name__}: {exc}") from exc
-                    results.append(f.result())
+                    res = f.result()
+                    if isinstance(res, TaskError):
+                        for g in futures:
+                            g.cancel()
+                        raise LidarfxError(f"{what} {names[f.key]}: {res.message}")
+                    results.append(res)
                     advance(1)
         finally:
             client.close()
