@@ -840,6 +840,18 @@ def _section(m: Mutant) -> list[str]:
     return ["--from", "0,5", "--to", "10,5", "--width", "1"]
 
 
+PIPELINE = Path(__file__).with_name("fuzz_pipeline.json")
+"""The pipeline ``lidarfx run`` gets (its read and write paths replaced by --input / --output)."""
+
+
+def _middle(m: Mutant) -> str:
+    """--bounds of the middle of the source's extent."""
+    if m.bounds:
+        x0, y0, _, x1, y1, _ = m.bounds
+        return f"{x0 + (x1 - x0) / 4:.3f},{y0 + (y1 - y0) / 4:.3f},{x1 - (x1 - x0) / 4:.3f},{y1 - (y1 - y0) / 4:.3f}"
+    return "0,0,10,10"
+
+
 _CONVERT_OUT = ("o.laz", "o.ply", "o.xyz", "o.las", "o.npz")
 _WHERE = ("z > 0", "classification in [2, 6] or z > 10", "intensity >= 0 and not (z < -1e6)")
 
@@ -866,6 +878,15 @@ COMMANDS: dict[str, Callable[[Mutant, int], list[str]]] = {
     "parts": lambda m, i: ["parts", m.path, "{OUT}/pa", "-r", "1", "--no-picture", "-q"],
     "members": lambda m, i: ["members", m.path, "{OUT}/o.geojson", "-q"],
     "report": lambda m, i: ["report", m.path, "{OUT}/rep", "--no-picture", "-q"],
+    "crop": lambda m, i: ["crop", m.path, "{OUT}/o.laz", "--bounds", _middle(m), "--allow-empty", "-q"],
+    "merge": lambda m, i: ["merge", m.path, "{OUT}/o.laz", "-q"],
+    "filter": lambda m, i: ["filter", m.path, "{OUT}/o.laz", "--outliers", "statistical", "-q"] if i % 2 else
+    ["filter", m.path, "{OUT}/o.laz", "--outliers", "radius", "--radius", "1", "--min-neighbours", "2", "-q"],
+    "reproject": lambda m, i: ["reproject", m.path, "{OUT}/o.laz", "--to", "EPSG:4326", "-q"],
+    "dsm": lambda m, i: ["dsm", m.path, "{OUT}/o.asc", "-r", "1", "-q"],
+    "chm": lambda m, i: ["chm", m.path, "{OUT}/o.asc", "-r", "1", "-q"],
+    "run": lambda m, i: ["run", str(PIPELINE), "--input", m.path, "--output", "{OUT}/o.laz", "-q"]
+    + (["--chunk-size", "20", "--workers", "1"] if i % 2 else []),
 }
 """Every command that reads a cloud, with small parameters (``{OUT}``: the run's output folder)."""
 

@@ -296,6 +296,31 @@ def test_merge_refuses_incompatible_files(tmp_path, run_cli):
     assert not (tmp_path / "m.laz").exists()
 
 
+def test_merge_of_las_1_0_and_of_a_header_without_bounds(tmp_path, run_cli):
+    """A LAS 1.0 input (laspy writes no 1.0) merges into LAS 1.1 with the same points; a header whose
+    bounds are NaN takes its bounds from the points."""
+    import struct
+
+    src = real("TO_core_last_zoom.laz")
+    assert str(laspy.open(src).header.version) == "1.0"
+    rc, _, err = run_cli(["merge", str(src), str(tmp_path / "m.laz"), "-q"])
+    assert rc == 0, err
+    a, b = laspy.read(src), laspy.read(tmp_path / "m.laz")
+    assert str(b.header.version) == "1.1" and b.header.point_format.id == a.header.point_format.id
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.y, b.y) and np.array_equal(a.z, b.z)
+    assert np.array_equal(a.classification, b.classification) and np.array_equal(a.gps_time, b.gps_time)
+    # the same file uncompressed, its header's max x / min x (bytes 179-194) set to NaN
+    las_path = tmp_path / "nan_bounds.las"
+    lidarfx.write(lidarfx.read(src), las_path)  # LAS 1.2 (laspy writes no 1.0)
+    raw = bytearray(las_path.read_bytes())
+    raw[179:195] = struct.pack("<2d", float("nan"), float("nan"))
+    las_path.write_bytes(bytes(raw))
+    rc, _, err = run_cli(["merge", str(las_path), str(real("TO_core_last_zoom.laz")), str(tmp_path / "m2.laz"), "-q"])
+    assert rc == 0, err
+    c = lidarfx.read(tmp_path / "m2.laz")
+    assert len(c) == 2 * len(a) and np.allclose(c.xyz[: len(a)], np.column_stack([a.x, a.y, a.z]), atol=1e-9)
+
+
 # --------------------------------------------------------------------------- outliers
 def _sor_reference(xyz, k, std):
     from scipy.spatial import cKDTree

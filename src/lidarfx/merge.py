@@ -55,7 +55,9 @@ SCAN_ANGLE_STEP = 0.006
 """Degrees per unit of the ``scan_angle`` field of point formats 6-10."""
 
 _FAMILIES = ((0, 1, 2, 3, 4, 5), (6, 7, 8, 9, 10))
-_MIN_VERSION = {0: (1, 0), 1: (1, 0), 2: (1, 2), 3: (1, 2), 4: (1, 3), 5: (1, 3)}
+_MIN_VERSION = {0: (1, 1), 1: (1, 1), 2: (1, 2), 3: (1, 2), 4: (1, 3), 5: (1, 3)}
+"""The oldest LAS version of each point format an output gets (laspy writes no LAS 1.0: a 1.0 input
+merges into 1.1, the same records)."""
 _INT32 = (-(2**31), 2**31 - 1)
 CHUNK_POINTS = 1 << 20
 """Points converted at a time by the streamed merge."""
@@ -410,6 +412,25 @@ def convert_records(rec, header_in, plan: MergePlan, i: int, name: str):
     return out
 
 
+def _bounds(path: Path, header) -> tuple[np.ndarray, np.ndarray]:
+    """The header's coordinate bounds, or, when they are not numbers (a damaged header), the
+    bounds of the file's points (a pass over them)."""
+    from .io import las
+
+    lo, hi = np.asarray(header.mins, dtype=np.float64), np.asarray(header.maxs, dtype=np.float64)
+    if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi):
+        return lo, hi
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for _, rec, h in las.iter_records(path, CHUNK_POINTS):
+        xyz = las.record_cloud(rec, h).xyz
+        xyz = xyz[np.all(np.isfinite(xyz), axis=1)]
+        if len(xyz):
+            lo, hi = np.minimum(lo, xyz.min(axis=0)), np.maximum(hi, xyz.max(axis=0))
+    if not np.all(lo <= hi):
+        raise LidarfxError(f"{path}: no point with finite coordinates to merge")
+    return lo, hi
+
+
 def merge_files(inputs: Sequence[str | os.PathLike] | str | os.PathLike, output: str | os.PathLike, *,
                 columns: Sequence[str] | None = None, progress: bool | None = None) -> dict[str, Any]:
     """Merge point-cloud files into ``output`` (see the module docstring); returns a summary.
@@ -454,8 +475,8 @@ def merge_files(inputs: Sequence[str | os.PathLike] | str | os.PathLike, output:
             raise LidarfxError(f"cannot read {p}: {one_line(exc)}") from exc
     counts = [int(h.point_count) for h in headers]
     use = [i for i, n in enumerate(counts) if n > 0] or [0]
-    plan = plan_merge(headers, [str(p) for p in paths], [headers[i].mins for i in use], [headers[i].maxs for i in use],
-                      counts)
+    bounds = [_bounds(paths[i], headers[i]) for i in use]
+    plan = plan_merge(headers, [str(p) for p in paths], [b[0] for b in bounds], [b[1] for b in bounds], counts)
     for w in plan.warnings:
         warnings.warn(w, LidarfxWarning, stacklevel=2)
     from .progress import bar, wanted

@@ -483,28 +483,37 @@ def run_tiled(
     manifest = _manifest(cat, command, options, grid, per_tile, ext)
     with _naming(work):  # a full disk in the work folder says so (its files are kept for --resume)
         have_split = _prepare_work(work, manifest, resume)
-        if have_split:
-            split = _read_split(work, cat.points)
-        else:
-            from ..progress import bar, wanted
+    try:
+        with _naming(work):
+            if have_split:
+                split = _read_split(work, cat.points)
+            else:
+                from ..progress import bar, wanted
 
-            if (work / "split").exists():
-                shutil.rmtree(work / "split")
-            with bar("splitting", cat.points, wanted(progress)) as advance:
-                split = split_inputs(cat, grid, work, advance)
-        t1 = time.perf_counter()
-        chunks = split["chunks"]
-        done = {p.stem for p in (work / "done").glob("*.json")}
-        todo = [c for c in chunks if c["name"] not in done or not (work / "out" / c["name"]).is_dir()]
-        threads = max(1, default_workers() // n_workers) if scheduler is None else 0
-        spec = {"command": command, "options": options, "mins": split["mins"], "maxs": split["maxs"],
-                "points": split["points"], "chunk_size": grid.size, "buffer": grid.buffer, "threads": threads,
-                "sources": len(cat.sources), "chunks": {c["name"]: (c["i"], c["j"]) for c in todo}}
-        n_exec = min(n_workers, max(1, len(todo)))
-        execute([(c["name"], process_chunk, (str(work), c["name"], spec)) for c in todo],
-                workers=n_exec, scheduler=scheduler, progress=progress)
-    t2 = time.perf_counter()
-    outputs = _merge(work, chunks, cat, out, per_tile, ext, progress, n_workers, scheduler)
+                if (work / "split").exists():
+                    shutil.rmtree(work / "split")
+                with bar("splitting", cat.points, wanted(progress)) as advance:
+                    split = split_inputs(cat, grid, work, advance)
+            t1 = time.perf_counter()
+            chunks = split["chunks"]
+            done = {p.stem for p in (work / "done").glob("*.json")}
+            todo = [c for c in chunks if c["name"] not in done or not (work / "out" / c["name"]).is_dir()]
+            threads = max(1, default_workers() // n_workers) if scheduler is None else 0
+            spec = {"command": command, "options": options, "mins": split["mins"], "maxs": split["maxs"],
+                    "points": split["points"], "chunk_size": grid.size, "buffer": grid.buffer, "threads": threads,
+                    "sources": len(cat.sources), "chunks": {c["name"]: (c["i"], c["j"]) for c in todo}}
+            n_exec = min(n_workers, max(1, len(todo)))
+            execute([(c["name"], process_chunk, (str(work), c["name"], spec)) for c in todo],
+                    workers=n_exec, scheduler=scheduler, progress=progress)
+        t2 = time.perf_counter()
+        outputs = _merge(work, chunks, cat, out, per_tile, ext, progress, n_workers, scheduler)
+    except LidarfxError:
+        # a damaged input or an option that does not fit: the same run would fail the same way and
+        # other inputs or options cannot resume it, so nothing is kept (a full disk, a kill or Ctrl-C
+        # keep the finished chunks for --resume)
+        if not keep_work:
+            shutil.rmtree(work, ignore_errors=True)
+        raise
     t3 = time.perf_counter()
     infos = []
     for c in chunks:
