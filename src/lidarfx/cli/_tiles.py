@@ -71,8 +71,8 @@ def _wants_tiles(args, command: str, by_size: bool) -> bool:
         return True
     if Path(args.output).suffix.lower() not in (".las", ".laz") and not Path(args.output).suffix:
         return True  # an output folder: one file per input tile
-    if not by_size or Path(src).suffix.lower() not in (".las", ".laz"):
-        return False
+    if not by_size or Path(src).suffix.lower() not in (".las", ".laz") or not Path(src).is_file():
+        return False  # a missing input is the in-memory run's error
     from ..tiles import open_catalog
     from ..tiles.plan import chunk_points_budget, default_workers
 

@@ -109,30 +109,17 @@ def run(args) -> int:
 
 
 def _chunked(args, pipe) -> bool:
-    """In chunks: a chunk option given, the input a folder or several files, the output a folder,
-    or (a pipeline that can run in chunks) an input larger than one chunk may hold."""
-    from pathlib import Path
+    """In chunks as the per-point commands decide it (:func:`lidarfx.cli._tiles.wants_tiles`: a chunk
+    option, a folder or pattern in, a folder out, or an input larger than one chunk may hold — the
+    last only when the pipeline can run in chunks), for the read and the last write step's paths."""
+    import argparse
 
-    from ..errors import LidarfxError
+    from ._tiles import wants_tiles
 
-    if args.chunk_size == 0:
-        if args.resume or args.scheduler:
-            raise LidarfxError("--chunk-size 0 runs in memory; --resume and --scheduler need chunks")
-        return False
-    if any(v is not None for v in (args.chunk_size, args.scheduler, args.buffer, args.workers, args.work_dir)) \
-            or args.resume:
-        return True
     if pipe.steps[0][0].kind != "read" or pipe.steps[-1][0].kind != "write":
         return False
-    src, out = pipe.steps[0][1]["path"], pipe.steps[-1][1]["path"]
-    if any(c in src for c in "*?[") and not Path(src).exists() or Path(src).is_dir() or not Path(out).suffix:
-        return True
-    if Path(src).suffix.lower() not in (".las", ".laz") or not Path(src).is_file() or pipe.chunk_problem():
-        return False
-    from ..tiles import open_catalog
-    from ..tiles.plan import chunk_points_budget, default_workers
-
-    return open_catalog(src).points > chunk_points_budget(default_workers())
+    paths = argparse.Namespace(**{**vars(args), "input": pipe.steps[0][1]["path"], "output": pipe.steps[-1][1]["path"]})
+    return wants_tiles(paths, "run", by_size=pipe.chunk_problem() is None)
 
 
 def _run_chunked(args, pipe, log) -> int:

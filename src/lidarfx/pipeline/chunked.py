@@ -215,7 +215,6 @@ def run_chunked(pipe, *, chunk_size: float | None = None, buffer: float | None =
     steps = chunk_options(pipe, inputs)
     cat = open_catalog(inputs)
     unit = inputs_unit_to_metre(inputs)
-    area = max(float((cat.maxs[0] - cat.mins[0]) * (cat.maxs[1] - cat.mins[1])), 1e-6)
     fused, exact_need, extra = [], 0.0, {}
     kw = dict(chunk_size=chunk_size, buffer=buffer, workers=workers, scheduler=scheduler, progress=progress)
     for i, name, opts in steps:
@@ -230,7 +229,7 @@ def run_chunked(pipe, *, chunk_size: float | None = None, buffer: float | None =
             extra[f"step {i} (filter)"] = facts
         try:
             proc.check(opts)
-            reach, exact = proc.buffer(opts, cat.points / area)
+            reach, exact = proc.buffer(opts, cat.density)
         except LidarfxError as exc:
             raise LidarfxError(f"step {i} ({name}): in chunks: {exc}") from None
         if name == "filter" and opts["method"] == "statistical":

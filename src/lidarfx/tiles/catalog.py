@@ -60,6 +60,12 @@ class Catalog:
         return np.max([s.maxs for s in self.sources], axis=0)
 
     @property
+    def density(self) -> float:
+        """Mean points per square coordinate unit over the bounding box in plan."""
+        area = max(float((self.maxs[0] - self.mins[0]) * (self.maxs[1] - self.mins[1])), 1e-6)
+        return self.points / area
+
+    @property
     def bytes(self) -> int:
         return sum(s.size for s in self.sources)
 

@@ -59,16 +59,11 @@ class Chunk:
     own: np.ndarray
     ids: np.ndarray
     source: np.ndarray
-    cell: tuple[int, int] | None = None
+    cell: tuple[int, int]
 
-    def square(self, ctx: "Context", q: np.ndarray) -> tuple[float, float, float, float]:
-        """The bounds of the chunk's square (``cell``; else the square of the first of ``q``)."""
-        if self.cell is not None:
-            return ctx.grid.bounds(int(self.cell[0]), int(self.cell[1]))
-        if not len(q):
-            return (0.0, 0.0, 0.0, 0.0)
-        i, j = ctx.grid.cells(q[:1, 0], q[:1, 1])
-        return ctx.grid.bounds(int(i[0]), int(j[0]))
+    def square(self, ctx: "Context") -> tuple[float, float, float, float]:
+        """The bounds of the chunk's square."""
+        return ctx.grid.bounds(int(self.cell[0]), int(self.cell[1]))
 
 
 @dataclass
@@ -466,8 +461,7 @@ def run_tiled(
         check_output_folder(out)
         for s in cat.sources:
             check_not_same_file(s.path, out)
-    area = max(float((cat.maxs[0] - cat.mins[0]) * (cat.maxs[1] - cat.mins[1])), 1e-6)
-    need, exact = proc.buffer(options, cat.points / area)  # coordinate units
+    need, exact = proc.buffer(options, cat.density)  # coordinate units
     buffer, chunk_size = length_to_units(unit, buffer), length_to_units(unit, chunk_size)
     if buffer is not None and exact and buffer < need * (1 - 1e-12):
         raise LidarfxError(f"--buffer {buffer * unit:g} m is narrower than the {need * unit:g} m the neighbourhoods of "

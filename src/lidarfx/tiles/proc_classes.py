@@ -49,8 +49,7 @@ def eigenclass_options(radii, references="trained", weighting="structure", rejec
 
                 cat = open_catalog(inputs)
                 u = inputs_unit_to_metre(inputs)
-                area = max(float((cat.maxs[0] - cat.mins[0]) * (cat.maxs[1] - cat.mins[1])), 1e-6) * u * u
-                rho = cat.points / area
+                rho = cat.density / (u * u)  # points per m²
                 hint = (f"; at the inputs' mean density ({rho:.3g} points per m²) about "
                         f"-r {float(f'{math.sqrt(40.0 / (math.pi * rho)):.2g}'):g} holds 40 points on a plane")
             except LidarfxError:

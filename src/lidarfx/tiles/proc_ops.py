@@ -107,7 +107,7 @@ def _mean_distances(chunk, ctx, o: dict, with_reach: bool = False):
         return (far, max(2.0 * b, b + 1.0) * unit_of(o)) + ((far,) if with_reach else ())
     index = NeighborIndex(cloud.xyz, knn_cell(cloud.xyz, k + 1), np.asarray(ctx.mins, dtype=np.float64))
     _, dist = index.knn(q, k + 1)
-    bx0, by0, bx1, by1 = chunk.square(ctx, q)
+    bx0, by0, bx1, by1 = chunk.square(ctx)
     lo, hi = np.asarray(ctx.mins, dtype=np.float64), np.asarray(ctx.maxs, dtype=np.float64)
     # a side whose buffered edge lies beyond the data misses no neighbour
     sides = [(q[:, 0] - (bx0 - b), bx0 - b < lo[0]), ((bx1 + b) - q[:, 0], bx1 + b > hi[0]),

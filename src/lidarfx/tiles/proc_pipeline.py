@@ -65,10 +65,8 @@ def pipeline_process(chunk, ctx, o: dict):
     reaches = [float(s["reach"]) for s in steps]
     # grow[k]: how far around the square step k computes = what the steps after it reach (capped)
     grow = [min(total, sum(reaches[k + 1:])) for k in range(len(steps))]
-    if chunk.cell is None:
-        raise LidarfxError("a fused pipeline chunk needs its grid square (Chunk.cell)")
     i, j = chunk.cell
-    square = ctx.grid.bounds(int(i), int(j))
+    square = chunk.square(ctx)
     cloud, pos = chunk.cloud, np.arange(len(chunk.cloud))
     ids, source = chunk.ids, chunk.source
     dropped = False

@@ -122,7 +122,7 @@ def features_process(chunk, ctx, o: dict):
 def _check_knn_reach(chunk, ctx, index, q: np.ndarray, k: int, unit: float = 1.0) -> None:
     """Every owned point's k-th neighbour must lie within the buffer: else a one-line error
     with the buffer needed."""
-    bx0, by0, bx1, by1 = chunk.square(ctx, q)
+    bx0, by0, bx1, by1 = chunk.square(ctx)
     room = np.minimum.reduce([q[:, 0] - (bx0 - ctx.grid.buffer), (bx1 + ctx.grid.buffer) - q[:, 0],
                               q[:, 1] - (by0 - ctx.grid.buffer), (by1 + ctx.grid.buffer) - q[:, 1]])
     kk = min(k, len(chunk.cloud))
